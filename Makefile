@@ -1,0 +1,38 @@
+# facesvg: `make run` sets up and converts the bundled sample (then serves the web UI); `make test` runs the tests.
+PY ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+export PYOPENGL_PLATFORM := egl
+
+.PHONY: setup run convert test golden bench clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PY) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+convert: setup
+	mkdir -p out
+	$(BIN)/facesvg convert samples/face.glb -o out/face.svg --progress
+
+run: convert
+	@if $(BIN)/python -c "import webapp" 2>/dev/null; then \
+		echo "Serving the web UI on http://127.0.0.1:5000 (Ctrl-C to stop)"; \
+		$(BIN)/facesvg serve --host 127.0.0.1 --port 5000; \
+	else echo "Wrote out/face.svg"; fi
+
+test: setup
+	$(BIN)/python -m pytest -q
+
+golden: setup
+	$(BIN)/python -m pytest -q --update-golden tests
+
+bench: setup
+	$(BIN)/python bench/run.py
+
+clean:
+	rm -rf out bench/out .pytest_cache

@@ -1,0 +1,100 @@
+"""2D extraction (the chapter's 'Extraction of 2D Data'): projection, culling, occlusion, shading, order."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from converter import render
+from converter.animation import FaceAnimation, face_normals, vertex_normals
+from converter.camera import Camera
+from converter.errors import InputError
+from converter.lighting import DEFAULT_LIGHTING, Lighting, lambert
+from converter.options import Progress, no_progress
+from converter.sheet import Sheet
+
+
+def fit_camera(anim: FaceAnimation, size: int = 512, yaw: float = 0.0, pitch: float = 0.0,
+               fov: float = 30.0, ortho: bool = False) -> Camera:
+    """The camera that frames the whole animation (every frame) from the chosen angle."""
+    return Camera.fit(anim.frames, size=size, yaw=yaw, pitch=pitch, fov=fov, ortho=ortho)
+
+
+def cull(xy: np.ndarray, ndc_z: np.ndarray, w: np.ndarray, faces: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Bool (T, F): whole-triangle view-frustum culling plus back-face culling (front = counter-clockwise in GL)."""
+    a, b, c = xy[:, faces[:, 0]], xy[:, faces[:, 1]], xy[:, faces[:, 2]]
+    # Screen y points down, so a counter-clockwise (front) triangle has a negative signed area here.
+    area2 = (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
+    front = area2 < 0
+    tri_w = w[:, faces]
+    in_front = (tri_w > 0).all(axis=-1)
+    tx, ty, tz = xy[..., 0][:, faces], xy[..., 1][:, faces], ndc_z[:, faces]
+    outside = (
+        (tx < 0).all(-1) | (tx > width).all(-1) | (ty < 0).all(-1) | (ty > height).all(-1)
+        | (tz < -1).all(-1) | (tz > 1).all(-1)
+    )
+    return front & in_front & ~outside
+
+
+def painter_order(depth: np.ndarray, faces: np.ndarray, candidates: np.ndarray, frame: int) -> np.ndarray:
+    """Candidate triangle ids sorted back to front by centroid depth at one frame (stable, deterministic)."""
+    centroid = depth[frame][faces[candidates]].mean(axis=1)
+    return candidates[np.argsort(-centroid, kind="stable")].astype(np.int32)
+
+
+def extract(
+    anim: FaceAnimation,
+    camera: Camera,
+    neutral: int = 0,
+    occlusion: bool = True,
+    reference_frames: tuple[int, ...] = (),
+    lighting: Lighting = DEFAULT_LIGHTING,
+    progress: Progress = no_progress,
+) -> Sheet:
+    """Project every frame, cull, find never-seen triangles, shade, order: the Sheet writers read."""
+    if not (0 <= neutral < anim.n_frames):
+        raise InputError(f"neutral frame {neutral} is outside 0..{anim.n_frames - 1}; choose one inside.")
+    frames, faces = anim.frames, anim.faces
+    xy, ndc_z, w = camera.project(frames)
+    visible = cull(xy, ndc_z, w, faces, camera.width, camera.height)
+    progress("project", 0.1)
+    if occlusion:
+        seen = render.triangle_ids(frames, faces, camera, progress=lambda f: progress("occlusion", 0.1 + 0.6 * f))
+        kept = (seen & visible).any(axis=0)
+    else:
+        kept = visible.any(axis=0)
+    progress("shade", 0.75)
+    face_rgb = lambert(face_normals(frames, faces), anim.triangle_colors()[None], camera.view, lighting)
+    vertex_rgb = lambert(vertex_normals(frames, faces), anim.face_base_colors()[None], camera.view, lighting)
+    order = painter_order(ndc_z, faces, np.flatnonzero(kept), neutral)
+    refs = {}
+    if reference_frames:
+        bad = [k for k in reference_frames if not 0 <= k < anim.n_frames]
+        if bad:
+            raise InputError(f"reference frame {bad[0]} is outside 0..{anim.n_frames - 1}.")
+        refs = render.render_frames(frames, faces, vertex_rgb, camera, list(reference_frames))
+    progress("extract", 0.9)
+    info = {
+        "frames": anim.n_frames,
+        "vertices": anim.n_vertices,
+        "triangles": anim.n_faces,
+        "triangles_kept": int(kept.sum()),
+        "triangles_never_visible": int(anim.n_faces - kept.sum()),
+    }
+    return Sheet(
+        camera=camera,
+        fps=anim.fps,
+        xy=xy.astype(np.float32),
+        depth=ndc_z.astype(np.float32),
+        faces=faces,
+        visible=visible,
+        kept=kept,
+        order=order,
+        face_rgb=face_rgb.astype(np.float32),
+        vertex_rgb=vertex_rgb.astype(np.float32),
+        part_ids=anim.part_ids,
+        part_names=tuple(p.name for p in anim.parts),
+        neutral=neutral,
+        name=anim.name,
+        references=refs,
+        info=info,
+    )

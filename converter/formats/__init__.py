@@ -1,0 +1,58 @@
+"""Input formats, recognised by content: glTF/GLB, a zip of OBJ frames (or OBJ + point cache), OBJ + PC2/MDD."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from converter.animation import FaceAnimation
+from converter.errors import InputError
+
+MAX_INPUT_BYTES = 1 << 30
+
+
+def sniff(data: bytes) -> str:
+    """The input kind from the first bytes: 'glb', 'gltf', 'zip', 'obj', or raises InputError."""
+    if data[:4] == b"glTF":
+        return "glb"
+    if data[:4] == b"PK\x03\x04":
+        return "zip"
+    head = data[:4096].lstrip()
+    if head[:1] == b"{":
+        return "gltf"
+    text = head.decode("latin-1")
+    if any(line.split(" ", 1)[0] in ("v", "f", "o", "g", "vt", "vn", "mtllib", "usemtl") for line in text.splitlines()[:200]):
+        return "obj"
+    raise InputError("the input is not a glTF/GLB file, a zip of OBJ frames, or an OBJ mesh; check the file.")
+
+
+def load(path: str | Path, fps: float | None = None, cache: str | Path | None = None) -> FaceAnimation:
+    """Read any supported input file into a FaceAnimation (resampled to fps when given)."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise InputError(f"{path} does not exist.") from None
+    except IsADirectoryError:
+        raise InputError(f"{path} is a folder; give a file.") from None
+    except OSError as exc:
+        raise InputError(f"cannot read {path}: {exc.strerror}.") from None
+    if not data:
+        raise InputError(f"{path.name} is empty.")
+    kind = sniff(data)
+    name = path.stem
+    if kind in ("glb", "gltf"):
+        from converter.formats import gltf
+
+        return gltf.load_gltf(data, base_dir=path.parent, fps=fps, name=name)
+    if kind == "zip":
+        from converter.formats import objseq
+
+        return objseq.load_zip(data, fps=fps, name=name)
+    from converter.formats import pointcache
+
+    if cache is None:
+        raise InputError(f"{path.name} is a single OBJ mesh; give its animation with --cache FILE.pc2|.mdd.")
+    cache_path = Path(cache)
+    if not cache_path.is_file():
+        raise InputError(f"point cache {cache_path} does not exist.")
+    return pointcache.load_obj_cache(data, cache_path.read_bytes(), fps=fps, name=name)

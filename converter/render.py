@@ -1,0 +1,118 @@
+"""Offscreen OpenGL through pyrender on Mesa EGL: the prerender and the triangle-id pass."""
+
+from __future__ import annotations
+
+import os
+from contextlib import contextmanager
+from typing import Iterator
+
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
+import numpy as np
+
+from converter.camera import Camera
+from converter.errors import RenderError
+
+EGL_HELP = (
+    "offscreen rendering needs Mesa EGL; install it with "
+    "'apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1' and keep PYOPENGL_PLATFORM=egl"
+)
+
+
+def _pyrender():
+    try:
+        import pyrender  # noqa: PLC0415 - imported late so the EGL platform variable is set first
+    except Exception as exc:  # ImportError, or PyOpenGL failing to find libEGL
+        raise RenderError(f"{EGL_HELP} ({exc}).") from None
+    return pyrender
+
+
+class _MatrixCamera:
+    """A pyrender camera whose projection is exactly our Camera's."""
+
+    def __new__(cls, camera: Camera):
+        pyrender = _pyrender()
+
+        class Fixed(pyrender.camera.Camera):
+            def get_projection_matrix(self, width=None, height=None):
+                return camera.projection.astype(np.float64)
+
+        return Fixed(znear=0.01, zfar=100.0)
+
+
+@contextmanager
+def offscreen(width: int, height: int) -> Iterator[object]:
+    """An OffscreenRenderer, deleted afterwards; RenderError names what to install when EGL is missing."""
+    pyrender = _pyrender()
+    try:
+        renderer = pyrender.OffscreenRenderer(width, height)
+    except Exception as exc:
+        raise RenderError(f"{EGL_HELP} ({type(exc).__name__}: {exc}).") from None
+    try:
+        yield renderer
+    finally:
+        renderer.delete()
+
+
+def _scene(camera: Camera):
+    pyrender = _pyrender()
+    scene = pyrender.Scene(bg_color=[0, 0, 0, 0], ambient_light=[0, 0, 0])
+    scene.add(_MatrixCamera(camera), pose=np.linalg.inv(camera.view))
+    return scene
+
+
+def _mesh(positions: np.ndarray, faces: np.ndarray, colors: np.ndarray, smooth: bool):
+    """A pyrender mesh with per-vertex (smooth) or per-face (flat) RGBA uint8 colours."""
+    pyrender = _pyrender()
+    import trimesh  # noqa: PLC0415
+
+    if smooth:
+        tm = trimesh.Trimesh(positions, faces, vertex_colors=colors, process=False)
+    else:
+        tm = trimesh.Trimesh(positions, faces, face_colors=colors, process=False)
+    return pyrender.Mesh.from_trimesh(tm, smooth=smooth)
+
+
+def triangle_ids(frames: np.ndarray, faces: np.ndarray, camera: Camera, progress=None) -> np.ndarray:
+    """Bool (T, F): which triangles cover at least one pixel of each frame's id render."""
+    pyrender = _pyrender()
+    t, f = frames.shape[0], faces.shape[0]
+    ids = np.arange(1, f + 1, dtype=np.int64)
+    rgba = np.stack([ids & 255, (ids >> 8) & 255, (ids >> 16) & 255, np.full(f, 255)], axis=1).astype(np.uint8)
+    seen = np.zeros((t, f), bool)
+    flags = pyrender.RenderFlags.FLAT
+    with offscreen(camera.width, camera.height) as r:
+        scene = _scene(camera)
+        node = None
+        for k in range(t):
+            if node is not None:
+                scene.remove_node(node)
+            node = scene.add(_mesh(frames[k], faces, rgba, smooth=False))
+            color, _ = r.render(scene, flags=flags)
+            px = color.reshape(-1, 3).astype(np.int64)
+            code = px[:, 0] | (px[:, 1] << 8) | (px[:, 2] << 16)
+            code = code[(code > 0) & (code <= f)]
+            # Multisampling blends ids along edges; a blend can only add a triangle, never hide one.
+            seen[k, np.unique(code) - 1] = True
+            if progress:
+                progress((k + 1) / t)
+    return seen
+
+
+def render_frames(
+    frames: np.ndarray, faces: np.ndarray, vertex_rgb: np.ndarray, camera: Camera, which: list[int]
+) -> dict[int, np.ndarray]:
+    """The prerender of chosen frames: GL-interpolated lit vertex colours (Gouraud), (H, W, 4) uint8 RGBA."""
+    pyrender = _pyrender()
+    out: dict[int, np.ndarray] = {}
+    flags = pyrender.RenderFlags.FLAT | pyrender.RenderFlags.RGBA
+    with offscreen(camera.width, camera.height) as r:
+        for k in which:
+            scene = _scene(camera)
+            rgba = np.concatenate(
+                [np.round(vertex_rgb[k] * 255), np.full((vertex_rgb.shape[1], 1), 255)], axis=1
+            ).astype(np.uint8)
+            scene.add(_mesh(frames[k], faces, rgba, smooth=True))
+            color, _ = r.render(scene, flags=flags)
+            out[int(k)] = np.ascontiguousarray(color)
+    return out

@@ -1,0 +1,64 @@
+"""Shared fixtures: golden files, the shared data folder, the bundled sample, small synthetic animations."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED_DATA = ROOT.parent / "shared" / "data"
+SAMPLE = ROOT / "samples" / "face.glb"
+
+
+def pytest_addoption(parser):
+    parser.addoption("--update-golden", action="store_true", help="rewrite golden files instead of comparing")
+
+
+@pytest.fixture
+def update_golden(request) -> bool:
+    return bool(request.config.getoption("--update-golden"))
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    if not SHARED_DATA.is_dir():
+        pytest.fail(f"shared data folder missing: {SHARED_DATA}")
+    return SHARED_DATA
+
+
+@pytest.fixture(scope="session")
+def sample_path() -> Path:
+    return SAMPLE
+
+
+def cube_animation(n_frames: int = 4, fps: float = 10.0):
+    """A unit cube spinning about y, outward counter-clockwise faces: a small exact test subject."""
+    from converter.animation import FaceAnimation, Part
+
+    v = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], np.float32)
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    faces = []
+    for a, b, c, d in quads:
+        faces += [(a, b, c), (a, c, d)]
+    faces = np.array(faces, np.int32)
+    # Make every face wind counter-clockwise seen from outside.
+    cent = v[faces].mean(1)
+    n = np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]])
+    flip = (n * cent).sum(1) < 0
+    faces[flip] = faces[flip][:, ::-1]
+    frames = []
+    for k in range(n_frames):
+        a = np.radians(20 * k)
+        r = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]], np.float32)
+        frames.append(v @ r.T)
+    return FaceAnimation(np.stack(frames), faces, np.zeros(len(faces), np.int32), (Part("skin", (0.8, 0.6, 0.5)),), fps, "cube")
+
+
+@pytest.fixture
+def cube():
+    return cube_animation()
