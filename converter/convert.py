@@ -33,7 +33,7 @@ def load(path: str | Path, options: ConversionOptions, cache: str | Path | None 
 
 def prepare(anim: FaceAnimation, options: ConversionOptions, report: Report, progress: Progress = no_progress) -> FaceAnimation:
     """The optional 3D stages in order: FAP driving, frame range, cloning, triangle budget."""
-    if options.fap:
+    if options.fap and options.to != "fap2d":  # the fap2d package carries the stream itself
         from converter import mpeg4
 
         t = time.perf_counter()

@@ -103,3 +103,26 @@ def artifacts() -> Path:
     """Folder for screenshots and other test artifacts (ignored by git)."""
     ARTIFACTS.mkdir(exist_ok=True)
     return ARTIFACTS
+
+
+GOLDEN = ROOT / "tests" / "golden"
+
+
+@pytest.fixture
+def golden(update_golden):
+    """golden(name, svg_bytes): compare canonical XML (lxml c14n) with tests/golden/name; --update-golden rewrites."""
+    from lxml import etree
+
+    def check(name: str, data: bytes) -> None:
+        canon = etree.tostring(etree.fromstring(data), method="c14n")
+        path = GOLDEN / name
+        if update_golden:
+            GOLDEN.mkdir(exist_ok=True)
+            path.write_bytes(canon)
+            return
+        if not path.exists():
+            pytest.fail(f"golden file {path.name} missing: run `pytest --update-golden` and review it")
+        expected = etree.tostring(etree.fromstring(path.read_bytes()), method="c14n")
+        assert canon == expected, f"{name} differs from its golden file (review, then `pytest --update-golden`)"
+
+    return check

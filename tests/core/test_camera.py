@@ -1,0 +1,98 @@
+"""Projection against hand-computed values, camera fitting, and whole-triangle culling on a cube."""
+
+import numpy as np
+import pytest
+
+from converter.camera import Camera, frustum, look_at, orthographic
+from converter.errors import InputError
+from converter.extract import cull, extract, fit_camera
+
+
+def test_perspective_projection_matches_hand_computation():
+    view = look_at(np.array([0.0, 0.0, 10.0]), np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    cam = Camera(view, frustum(-1, 1, -1, 1, 1, 100), 200, 100)
+    xy, z, w = cam.project(np.array([[1.0, 0.5, 0.0], [0.0, 0.0, 0.0]]))
+    # eye space (1, 0.5, -10): ndc x = 2n/(r-l) * x / -z = 0.1, ndc y = 0.05; pixels: y grows downwards.
+    assert xy[0] == pytest.approx([(0.1 + 1) / 2 * 200, (1 - 0.05) / 2 * 100])
+    assert xy[1] == pytest.approx([100, 50])
+    assert w[0] == pytest.approx(10.0)
+    # ndc z of eye depth 10 for near 1, far 100: (f+n)/(f-n) - 2fn/((f-n) d)
+    assert z[0] == pytest.approx(101 / 99 - 200 / (99 * 10))
+
+
+def test_orthographic_projection_matches_hand_computation():
+    view = look_at(np.array([0.0, 0.0, 5.0]), np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    cam = Camera(view, orthographic(-2, 2, -1, 1, 0.1, 10), 400, 200, True)
+    xy, _, w = cam.project(np.array([[1.0, -0.5, 3.0]]))
+    assert xy[0] == pytest.approx([(0.5 + 1) / 2 * 400, (1 + 0.5) / 2 * 200])
+    assert w[0] == pytest.approx(1.0)
+
+
+def test_matrices_round_trip_through_json():
+    cam = Camera.fit(np.random.default_rng(0).normal(size=(3, 50, 3)), size=64, yaw=30, pitch=-10)
+    again = Camera.from_json(cam.to_json())
+    assert np.array_equal(again.view, cam.view) and np.array_equal(again.projection, cam.projection)
+
+
+@pytest.mark.parametrize("yaw,pitch,ortho", [(0, 0, False), (35, 10, False), (-90, 0, True), (180, 60, False)])
+def test_fit_frames_every_vertex_of_every_frame(yaw, pitch, ortho):
+    rng = np.random.default_rng(1)
+    frames = rng.normal(size=(5, 200, 3)) * [3, 1, 0.5] + rng.normal(size=(5, 1, 3))
+    cam = Camera.fit(frames, size=256, yaw=yaw, pitch=pitch, ortho=ortho)
+    xy, z, w = cam.project(frames)
+    assert (w > 0).all() and (np.abs(z) < 1).all()
+    assert xy.min() >= 0 and xy.max() <= 256
+    # The fit is tight: the larger extent fills the view up to the margin.
+    extent = max(np.ptp(xy[..., 0]), np.ptp(xy[..., 1]))
+    assert extent > 256 * 0.85
+
+
+def test_yaw_90_looks_from_positive_x():
+    frames = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 0, 1]]])
+    cam = Camera.fit(frames, size=100, yaw=90)
+    assert cam.eye_position()[0] > 1 and abs(cam.eye_position()[2]) < 1e-6 + 0.5
+
+
+def test_bad_camera_options_are_input_errors():
+    with pytest.raises(InputError):
+        Camera.fit(np.zeros((1, 3, 3)), size=4)
+    with pytest.raises(InputError):
+        Camera.fit(np.zeros((1, 3, 3)), fov=0)
+
+
+def test_cube_front_view_sees_exactly_the_front_face(cube):
+    cam = fit_camera(cube, size=128)
+    xy, z, w = cam.project(cube.frames)
+    vis = cull(xy, z, w, cube.faces, 128, 128)
+    centroids = cube.frames[0][cube.faces].mean(1)
+    front = np.isclose(centroids[:, 2], 1.0)
+    assert np.array_equal(vis[0], front)
+    # Rotating by 20 degrees a frame brings the +x side into view from frame 1 on.
+    side = np.isclose(centroids[:, 0], -1.0)
+    assert vis[1][side].all() and not vis[0][side].any()
+
+
+def test_frustum_culling_drops_whole_triangles_outside(cube):
+    frames = np.array(cube.frames)
+    cam = fit_camera(cube, size=128)
+    frames[2] += np.array([100.0, 0, 0], np.float32)  # frame 2 leaves the view entirely
+    xy, z, w = cam.project(frames)
+    vis = cull(xy, z, w, cube.faces, 128, 128)
+    assert vis[0].any() and not vis[2].any()
+
+
+def test_extract_occlusion_keeps_only_seen_triangles(cube):
+    from converter.animation import FaceAnimation
+
+    # Two cubes, one hidden right behind the other from the front: its front faces are never seen.
+    f = cube.frames[:1]
+    frames = np.concatenate([f, f * 0.5 + np.array([0, 0, -3.0], np.float32)], axis=1)
+    faces = np.concatenate([cube.faces, cube.faces + 8])
+    anim = FaceAnimation(frames, faces, np.zeros(len(faces), np.int32), cube.parts, 10.0)
+    cam = fit_camera(anim, size=96)
+    sheet = extract(anim, cam, occlusion=True)
+    assert sheet.kept[:12].sum() == 2  # the big cube's front face
+    assert not sheet.kept[12:].any()  # the hidden cube's front face faces us but is covered
+    assert sheet.info["triangles_never_visible"] == 22
+    no_occ = extract(anim, cam, occlusion=False)
+    assert no_occ.kept[12:].sum() == 2

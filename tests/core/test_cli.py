@@ -1,0 +1,84 @@
+"""The facesvg command: conversion, info, and bad input (one line, exit 2, nothing written or touched)."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+BIN = [sys.executable, "-m", "converter.cli"]
+
+
+def run(*args, cwd=None):
+    return subprocess.run([*BIN, *map(str, args)], capture_output=True, text=True, cwd=cwd, timeout=600)
+
+
+def test_convert_sample_writes_svg_and_summary(sample_path, tmp_path):
+    out = tmp_path / "face.svg"
+    r = run("convert", sample_path, "-o", out, "--size", "128", "--end", "10", "--report", tmp_path / "r.json")
+    assert r.returncode == 0, r.stderr
+    assert out.read_bytes().startswith(b"<svg")
+    assert "10 frames" in r.stdout and "triangles kept" in r.stdout
+    assert (tmp_path / "r.json").exists()
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no temp file left
+
+
+def test_info_describes_sample(sample_path):
+    r = run("info", sample_path, "--json")
+    assert r.returncode == 0, r.stderr
+    import json
+
+    info = json.loads(r.stdout)
+    assert info["frames"] > 1 and info["triangles"] > 100 and "skin" in info["parts"]
+
+
+@pytest.mark.parametrize(
+    "content,needle",
+    [
+        (b"", "empty"),
+        (b"\x00\x01garbage" * 10, "not a glTF"),
+        (b"glTF\x02\x00\x00\x00\x10", ""),  # truncated GLB header
+        (b'{"asset": {"version": "2.0"}}', "mesh"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2_and_no_output(tmp_path, content, needle):
+    src = tmp_path / "in.glb"
+    src.write_bytes(content)
+    out = tmp_path / "out.svg"
+    r = run("convert", src, "-o", out)
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("facesvg: error:"), r.stderr
+    assert needle.lower() in lines[0].lower()
+    assert "Traceback" not in r.stderr
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.glb"]
+
+
+def test_failed_conversion_leaves_existing_output_untouched(tmp_path):
+    src = tmp_path / "bad.glb"
+    src.write_bytes(b"not a model")
+    out = tmp_path / "out.svg"
+    out.write_bytes(b"precious")
+    r = run("convert", src, "-o", out)
+    assert r.returncode == 2 and out.read_bytes() == b"precious"
+
+
+@pytest.mark.parametrize(
+    "args,needle",
+    [
+        (["--size", "4"], "size"),
+        (["--tolerance", "0"], "tolerance"),
+        (["--start", "5", "--end", "2"], "range"),
+        (["--shading", "toon"], "shading"),
+        (["-o", "/nonexistent-folder/x.svg"], "folder"),
+    ],
+)
+def test_bad_options_are_clear_errors(sample_path, args, needle):
+    r = run("convert", sample_path, *args)
+    assert r.returncode == 2 and needle in r.stderr.lower() and "Traceback" not in r.stderr
+
+
+def test_missing_input_file(tmp_path):
+    r = run("convert", tmp_path / "nope.glb")
+    assert r.returncode == 2 and "does not exist" in r.stderr

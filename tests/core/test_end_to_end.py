@@ -1,0 +1,51 @@
+"""End to end: bundled sample -> facesvg convert -> SVG in headless Chromium vs the pyrender frame."""
+
+import json
+import re
+
+import numpy as np
+import pytest
+from svgrender import chromium_frame, iou
+
+from converter import formats, render
+from converter.animation import vertex_normals
+from converter.camera import Camera
+from converter.convert import convert
+from converter.lighting import lambert
+from converter.options import ConversionOptions
+
+
+def metadata(svg: bytes) -> dict:
+    m = re.search(rb'<metadata id="facesvg">(.*?)</metadata>', svg, re.S)
+    from xml.sax.saxutils import unescape
+
+    return json.loads(unescape(m.group(1).decode()))
+
+
+@pytest.mark.browser
+@pytest.mark.slow
+def test_sample_silhouette_matches_prerender(browser, sample_path, artifacts):
+    options = ConversionOptions(size=256)
+    result = convert(sample_path, options)
+    meta = metadata(result.data)
+    cam = Camera.from_json(meta["camera"])
+    anim = formats.load(sample_path)
+    assert meta["frames"] == anim.n_frames and meta["fps"] == pytest.approx(anim.fps)
+    picks = [0, anim.n_frames // 3, anim.n_frames // 2, (2 * anim.n_frames) // 3, anim.n_frames - 1]
+    rgb = lambert(vertex_normals(anim.frames, anim.faces), anim.face_base_colors()[None], cam.view)
+    refs = render.render_frames(anim.frames, anim.faces, rgb, cam, picks)
+    scores = []
+    for k in picks:
+        svg_px = chromium_frame(browser, result.data, k / anim.fps, cam.width, cam.height)
+        ref_mask = refs[k][..., 3] > 127
+        svg_mask = svg_px[..., 3] > 127
+        scores.append(iou(svg_mask, ref_mask))
+        if k == picks[1]:
+            from PIL import Image
+
+            Image.fromarray(np.concatenate([svg_px, refs[k]], axis=1)).save(artifacts / "e2e_sample.png")
+    assert min(scores) >= 0.97, f"silhouette IoU per frame {scores}"
+    # The animation really moves: two frames differ.
+    a = chromium_frame(browser, result.data, picks[0] / anim.fps, cam.width, cam.height)
+    b = chromium_frame(browser, result.data, picks[2] / anim.fps, cam.width, cam.height)
+    assert np.abs(a.astype(int) - b.astype(int)).sum() > 0
