@@ -14,9 +14,11 @@ def sniff(data: bytes) -> str:
     """The input kind from the first bytes: 'glb', 'gltf', 'zip', 'obj', or raises InputError."""
     if data[:4] == b"glTF":
         return "glb"
-    if data[:4] == b"PK\x03\x04":
+    if data[:4] in (b"PK\x03\x04", b"PK\x05\x06"):
         return "zip"
-    head = data[:4096].lstrip()
+    if data[:12] == b"POINTCACHE2\0":
+        raise InputError("this is a PC2 point cache; give its OBJ mesh as the input and the cache with --cache.")
+    head = data[:4096].removeprefix(b"\xef\xbb\xbf").lstrip()
     if head[:1] == b"{":
         return "gltf"
     text = head.decode("latin-1")

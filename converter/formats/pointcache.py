@@ -1,0 +1,135 @@
+"""OBJ rest mesh + PC2 or MDD point cache to FaceAnimation.
+
+PC2 (3ds Max, Blender, Maya): 'POINTCACHE2\\0', int32 version, int32 points, float32 start frame, float32 sample
+rate (scene frames per sample), int32 samples, then float32 xyz; little-endian. PC2 does not store the scene's
+frame rate: samples are sampleRate scene frames apart and the scene runs at `fps` (default 30), so with the
+usual sampleRate 1 every sample is one output frame.
+
+MDD (LightWave, Blender): big-endian int32 frames, int32 points, float32 times[frames] in seconds, then float32
+xyz per frame. Times, when increasing, set the source rate; the cache is resampled (linearly) to `fps`.
+
+Axes. Blender writes MDD in its own Z-up world space (recent exporters; Blender 2.5x swapped y and z instead)
+while its OBJ exporter writes Y-up by default, so the cache and the OBJ disagree by an axis change. With
+axes="auto" (default) we try the candidate axis maps in AXIS_MAPS on the first cache frame and keep the one
+that lands closest to the OBJ rest positions (identity wins ties); "none", "zup" or "swapyz" force one.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+
+import numpy as np
+
+from converter.animation import FaceAnimation
+from converter.errors import InputError
+from converter.formats.obj import parse_obj
+from converter.formats.parts import parts_for_groups
+
+DEFAULT_FPS = 30.0
+MAX_FRAMES = 100_000
+PC2_MAGIC = b"POINTCACHE2\0"
+# Each map takes cache (x, y, z) to OBJ axes.
+AXIS_MAPS = {
+    "none": lambda p: p,
+    "zup": lambda p: np.stack([p[..., 0], p[..., 2], -p[..., 1]], axis=-1),  # Blender Z-up -> OBJ Y-up
+    "swapyz": lambda p: np.stack([p[..., 0], p[..., 1], -p[..., 2]], axis=-1),  # Blender 2.5x y/z swap -> Y-up
+}
+
+
+def load_obj_cache(obj_bytes: bytes, cache_bytes: bytes, fps: float | None = None, name: str = "face",
+                   axes: str = "auto") -> FaceAnimation:
+    """An OBJ rest mesh animated by a PC2 or MDD point cache, resampled at fps (default: the cache's rate)."""
+    if fps is not None and not (math.isfinite(fps) and fps > 0):
+        raise InputError(f"fps must be a positive number, got {fps}.")
+    if axes not in ("auto", *AXIS_MAPS):
+        raise InputError(f"unknown axes {axes!r}; use auto, none, zup or swapyz.")
+    rest, faces, groups_of_face, groups = parse_obj(obj_bytes.decode("utf-8", errors="replace"), f"{name}.obj")
+    if cache_bytes[:12] == PC2_MAGIC:
+        points, times = read_pc2(cache_bytes, fps or DEFAULT_FPS)
+    else:
+        points, times = read_mdd(cache_bytes)
+    if points.shape[1] != len(rest):
+        raise InputError(f"the point cache has {points.shape[1]} points but the OBJ has {len(rest)} vertices; "
+                         "export both from the same mesh.")
+    if not np.isfinite(points).all():
+        raise InputError("the point cache has NaN or infinite positions; re-export it.")
+    points = AXIS_MAPS[axes if axes != "auto" else detect_axes(points[0], rest)](points)
+    source_fps = rate_of(times)
+    out_fps = float(fps) if fps else (source_fps or DEFAULT_FPS)
+    if source_fps is None:  # no usable times: one sample per output frame
+        times = np.arange(len(points)) / out_fps
+    frames = resample(points, times, out_fps)
+    parts, part_ids = parts_for_groups(groups, groups_of_face)
+    return FaceAnimation(frames, faces, part_ids, parts, out_fps, name,
+                         extras={"source_fps": source_fps, "cache_frames": int(len(points))})
+
+
+def read_pc2(data: bytes, scene_fps: float) -> tuple[np.ndarray, np.ndarray]:
+    """(samples (S, P, 3) float32, sample times in seconds) of a PC2 cache with the scene at scene_fps."""
+    if len(data) < 32:
+        raise InputError("the PC2 file is truncated: its 32-byte header is incomplete.")
+    _, version, n_points, start, rate, n_samples = struct.unpack_from("<12siiffi", data)
+    if n_points <= 0 or n_samples <= 0:
+        raise InputError(f"the PC2 file has {n_samples} samples of {n_points} points; export at least one frame.")
+    if not (math.isfinite(rate) and rate > 0 and math.isfinite(start)):
+        raise InputError(f"the PC2 file has an invalid sample rate {rate}; re-export it.")
+    need = 32 + n_samples * n_points * 12
+    if len(data) < need:
+        raise InputError(f"the PC2 file is truncated: {len(data)} bytes of {need}.")
+    if n_samples > MAX_FRAMES:
+        raise InputError(f"the PC2 file has {n_samples} samples, too many to convert; trim it.")
+    points = np.frombuffer(data, "<f4", n_samples * n_points * 3, 32).reshape(n_samples, n_points, 3)
+    return points.astype(np.float32), np.arange(n_samples) * float(rate) / scene_fps
+
+
+def read_mdd(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """(frames (T, P, 3) float32, times in seconds) of an MDD cache."""
+    if len(data) < 8:
+        raise InputError("the point cache is neither PC2 nor a complete MDD file (header too short).")
+    n_frames, n_points = struct.unpack_from(">ii", data)
+    if n_frames <= 0 or n_points <= 0:
+        raise InputError(f"the MDD file has {n_frames} frames of {n_points} points; export at least one frame.")
+    if n_frames > MAX_FRAMES:
+        raise InputError(f"the MDD file has {n_frames} frames, too many to convert; trim it.")
+    need = 8 + 4 * n_frames + n_frames * n_points * 12
+    if len(data) < need:
+        raise InputError(f"the MDD file is truncated: {len(data)} bytes of {need}.")
+    times = np.frombuffer(data, ">f4", n_frames, 8).astype(np.float64)
+    points = np.frombuffer(data, ">f4", n_frames * n_points * 3, 8 + 4 * n_frames).reshape(n_frames, n_points, 3)
+    return points.astype(np.float32), times
+
+
+def detect_axes(first: np.ndarray, rest: np.ndarray) -> str:
+    """The AXIS_MAPS key that brings a cache frame closest to the rest mesh (RMS distance; identity on ties)."""
+    first, rest = first.astype(np.float64), rest.astype(np.float64)
+    errors = {k: float(np.sqrt(((f(first) - rest) ** 2).sum(1).mean())) for k, f in AXIS_MAPS.items()}
+    best = min(errors, key=errors.get)
+    return best if errors[best] < 0.999 * errors["none"] else "none"
+
+
+def rate_of(times: np.ndarray) -> float | None:
+    """Samples per second when the times increase strictly and evenly enough to trust, else None."""
+    if len(times) < 2 or not np.isfinite(times).all():
+        return None
+    gaps = np.diff(times)
+    if gaps.min() <= 0:
+        return None
+    rate = 1.0 / float(np.median(gaps))
+    whole = round(rate)
+    return float(whole) if abs(rate - whole) < 1e-3 * rate else round(rate, 3)
+
+
+def resample(points: np.ndarray, times: np.ndarray, fps: float) -> np.ndarray:
+    """Linear interpolation of (S, P, 3) samples at times to frames k / fps covering [times[0], times[-1]]."""
+    t0, t1 = float(times[0]), float(times[-1])
+    # Times are float32: a time within 1/1000 of a frame still makes that frame.
+    n = int(math.floor((t1 - t0) * fps + 1e-3)) + 1
+    if n > MAX_FRAMES:
+        raise InputError(f"the point cache lasts {t1 - t0:.0f} s, too long to convert at {fps} fps; trim it.")
+    if len(points) == 1:
+        return points[:1]
+    t = t0 + np.arange(n) / fps
+    k = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 2)
+    u = np.clip((t - times[k]) / (times[k + 1] - times[k]), 0.0, 1.0).astype(np.float32)[:, None, None]
+    return points[k] * (1 - u) + points[k + 1] * u
