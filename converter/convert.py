@@ -9,6 +9,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 from converter import extract as extraction
 from converter import formats
@@ -55,18 +56,21 @@ def prepare(anim: FaceAnimation, options: ConversionOptions, report: Report, pro
         from converter import simplify
 
         t = time.perf_counter()
-        anim = simplify.simplify(anim, options.max_triangles, report)
+        anim = simplify.simplify(anim, options.max_triangles, report, options=options)
         report.timings["simplify"] = time.perf_counter() - t
         progress("simplify", 0.1)
     return anim
 
 
 def convert_animation(
-    anim: FaceAnimation, options: ConversionOptions, progress: Progress = no_progress, source_sha256: str = ""
+    anim: FaceAnimation, options: ConversionOptions, progress: Progress = no_progress, source_sha256: str = "",
+    on_prepared: Callable[[FaceAnimation], None] | None = None,
 ) -> Result:
     """Convert an in-memory FaceAnimation with the options; the library's main entry point."""
     report = Report()
     anim = prepare(anim, options, report, progress)
+    if on_prepared is not None:  # callers that also need the 3D animation (the web UI's prerender)
+        on_prepared(anim)
     if options.to == "fap2d":
         from converter.writers import fap2d
 
@@ -99,13 +103,13 @@ def convert_animation(
 
 
 def convert(path: str | Path, options: ConversionOptions, progress: Progress = no_progress,
-            cache: str | Path | None = None) -> Result:
+            cache: str | Path | None = None, on_prepared: Callable[[FaceAnimation], None] | None = None) -> Result:
     """Convert an input file with the options: the whole pipeline, nothing written to disk."""
     t = time.perf_counter()
     progress("load", 0.0)
     anim = load(path, options, cache)
     load_s = time.perf_counter() - t
-    result = convert_animation(anim, options, progress, source_sha256=file_sha256(path))
+    result = convert_animation(anim, options, progress, source_sha256=file_sha256(path), on_prepared=on_prepared)
     result.report.timings = {"load": load_s, **result.report.timings}
     return result
 
@@ -126,6 +130,9 @@ def write_atomic(path: str | Path, data: bytes) -> None:
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the file the usual permissions
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
