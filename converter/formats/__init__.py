@@ -29,7 +29,12 @@ def sniff(data: bytes) -> str:
 
 def load(path: str | Path, fps: float | None = None, cache: str | Path | None = None) -> FaceAnimation:
     """Read any supported input file into a FaceAnimation (resampled to fps when given)."""
-    path = Path(path)
+    anim = _load(Path(path), fps, cache)
+    anim.extras.setdefault("source_path", str(path))  # lets 3D stages find side files such as NAME.fdp.json
+    return anim
+
+
+def _load(path: Path, fps: float | None, cache: str | Path | None) -> FaceAnimation:
     try:
         data = path.read_bytes()
     except FileNotFoundError:
