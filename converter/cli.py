@@ -51,6 +51,9 @@ def add_conversion_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-triangles", type=int, help="triangle budget")
     p.add_argument("--no-occlusion", dest="occlusion", action="store_false", help="keep never-seen triangles")
     p.add_argument("--svgz", action="store_true", help="gzip the SVG")
+    p.add_argument("--no-rigid", dest="rigid", action="store_false",
+                   help="do not factor rigid 2D motion into animated group transforms")
+    p.add_argument("--smooth", type=float, help="temporal smoothing, Gaussian sigma in frames (default 0: off)")
     p.add_argument("--fap", help="MPEG-4 FAP stream that drives the input face")
     p.add_argument("--fdp", help="feature-point definition of the input face (JSON or Xface .fdp)")
     p.add_argument("--clone-target", help="put the animation onto this face before converting")
@@ -74,7 +77,8 @@ def cmd_convert(args: argparse.Namespace) -> int:
     from converter.convert import convert, write_atomic
 
     options = options_from_args(args)
-    out = Path(args.output) if args.output else Path(args.input).with_suffix(".svgz" if options.svgz else ".svg")
+    suffix = ".zip" if options.to == "fap2d" else (".svgz" if options.svgz else ".svg")
+    out = Path(args.output) if args.output else Path(args.input).with_suffix(suffix)
     if out.exists() and out.is_dir():
         raise_input(f"output {out} is a folder; give a file name.")
     if not out.parent.exists():

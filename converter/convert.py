@@ -59,6 +59,10 @@ def prepare(anim: FaceAnimation, options: ConversionOptions, report: Report, pro
         anim = simplify.simplify(anim, options.max_triangles, report, options=options)
         report.timings["simplify"] = time.perf_counter() - t
         progress("simplify", 0.1)
+    if options.smooth:
+        from converter import smoothing
+
+        anim = smoothing.apply(anim, options, report)
     return anim
 
 

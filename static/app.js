@@ -1,0 +1,141 @@
+// facesvg web UI: drag-and-drop upload, live job progress, result player. No framework; pages work without it.
+"use strict";
+
+function setupDrop() {
+  const drop = document.querySelector("[data-drop]");
+  const input = document.getElementById("file");
+  const label = document.getElementById("file-name");
+  if (!drop || !input) return;
+  const show = () => { label.textContent = input.files.length ? input.files[0].name : ""; };
+  input.addEventListener("change", show);
+  ["dragenter", "dragover"].forEach((t) => drop.addEventListener(t, (e) => {
+    e.preventDefault(); drop.classList.add("dragover");
+  }));
+  ["dragleave", "drop"].forEach((t) => drop.addEventListener(t, () => drop.classList.remove("dragover")));
+  drop.addEventListener("drop", (e) => {
+    e.preventDefault();
+    if (e.dataTransfer && e.dataTransfer.files.length) {
+      input.files = e.dataTransfer.files;
+      show();
+      document.getElementById("convert").focus();
+    }
+  });
+  // A file dropped outside the zone must not navigate away from the form.
+  window.addEventListener("dragover", (e) => e.preventDefault());
+  window.addEventListener("drop", (e) => e.preventDefault());
+}
+
+function setupProgress() {
+  const box = document.querySelector("[data-status-url]");
+  if (!box) return;
+  const url = box.dataset.statusUrl;
+  const bar = document.getElementById("progress");
+  const stage = document.getElementById("stage");
+  const percent = document.getElementById("percent");
+  const state = document.getElementById("job-state");
+  let delay = 300;
+  async function poll() {
+    try {
+      const r = await fetch(url, { headers: { Accept: "application/json" }, cache: "no-store" });
+      if (r.status === 404) { stage.textContent = "this job was deleted"; return; }
+      const job = await r.json();
+      bar.value = job.percent;
+      percent.textContent = job.percent;
+      stage.textContent = job.stage;
+      state.textContent = job.state;
+      state.className = "state state-" + job.state;
+      if (["done", "failed", "cancelled"].includes(job.state)) {
+        if (job.state === "done") { bar.value = 100; percent.textContent = "100"; stage.textContent = "done"; }
+        setTimeout(() => window.location.reload(), 400); // let the full bar show before the result replaces it
+        return;
+      }
+      delay = 400;
+    } catch (err) {
+      delay = Math.min(delay * 2, 5000); // server busy or restarting: back off, keep trying
+    }
+    setTimeout(poll, delay);
+  }
+  poll();
+}
+
+function setupPlayer() {
+  const player = document.getElementById("player");
+  if (!player || !document.getElementById("play")) return; // no player, or a still: nothing to drive
+  const fps = parseFloat(player.dataset.fps) || 30;
+  const frames = parseInt(player.dataset.frames, 10) || 1;
+  const previews = JSON.parse(player.dataset.previews || "[]");
+  const base = player.dataset.previewBase;
+  const obj = document.getElementById("svg-view");
+  const img = document.getElementById("prerender");
+  const slider = document.getElementById("frame-slider");
+  const label = document.getElementById("frame-label");
+  const prLabel = document.getElementById("prerender-label");
+  const play = document.getElementById("play");
+  const duration = frames / fps;
+  let svg = null;
+  let playing = false;
+  let shown = -1;
+  let t0 = 0, wall0 = 0;
+
+  // Preload the prerenders so scrubbing is instant.
+  previews.forEach((k) => { const i = new Image(); i.src = base + k; });
+
+  function nearestPreview(k) {
+    let best = previews[0];
+    for (const p of previews) if (Math.abs(p - k) < Math.abs(best - k)) best = p;
+    return best;
+  }
+  function showFrame(k) {
+    slider.value = k;
+    label.textContent = `frame ${k} / ${frames} · ${(k / fps).toFixed(2)} s`;
+    if (img && previews.length) {
+      const p = nearestPreview(k);
+      if (p !== shown) { img.src = base + p; shown = p; }
+      prLabel.textContent = p === k ? `frame ${p}` : `frame ${p} (nearest rendered)`;
+    }
+  }
+  function seek(k) {
+    if (svg && svg.setCurrentTime) { svg.pauseAnimations(); svg.setCurrentTime(k / fps); }
+    showFrame(k);
+  }
+  function tick() {
+    if (!playing) return;
+    let t;
+    if (svg && svg.getCurrentTime) t = svg.getCurrentTime();
+    else t = t0 + (performance.now() - wall0) / 1000;
+    const k = Math.floor(((t % duration) + duration) % duration * fps) % frames;
+    showFrame(k);
+    requestAnimationFrame(tick);
+  }
+  function setPlaying(on) {
+    playing = on;
+    play.textContent = on ? "Pause" : "Play";
+    play.setAttribute("aria-pressed", String(on));
+    const k = parseInt(slider.value, 10) || 0;
+    if (on) {
+      t0 = k / fps; wall0 = performance.now();
+      if (svg && svg.setCurrentTime) { svg.setCurrentTime(k / fps); svg.unpauseAnimations(); }
+      requestAnimationFrame(tick);
+    } else {
+      seek(k);
+    }
+  }
+  play.addEventListener("click", () => setPlaying(!playing));
+  slider.addEventListener("input", () => { if (playing) setPlaying(false); seek(parseInt(slider.value, 10)); });
+  player.addEventListener("keydown", (e) => {
+    if (e.key === " " && e.target === slider) { e.preventDefault(); setPlaying(!playing); }
+  });
+  function attach() {
+    const doc = obj && obj.contentDocument;
+    svg = doc && doc.documentElement && doc.documentElement.setCurrentTime ? doc.documentElement : null;
+    seek(parseInt(slider.value, 10) || 0);
+  }
+  if (obj) {
+    obj.addEventListener("load", attach);
+    if (obj.contentDocument && obj.contentDocument.readyState === "complete") attach();
+  } else {
+    showFrame(0);
+  }
+}
+
+document.addEventListener("DOMContentLoaded", () => { setupDrop(); setupProgress(); setupPlayer(); });

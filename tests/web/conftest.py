@@ -1,0 +1,190 @@
+"""Web UI fixtures: a tiny animated glTF, apps on the embedded or RQ backend, a real redis-server, a live server."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import struct
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import SAMPLE, cube_animation
+
+SMALL = {"size": "64", "occlusion": "0"}  # keeps conversions in tests fast
+
+
+def glb_bytes(n_keys: int = 4, fps: float = 10.0) -> bytes:
+    """A cube with one morph target (top face rises) animated by a LINEAR weights track: a minimal glTF."""
+    anim = cube_animation(1)
+    pos = anim.frames[0].astype(np.float32)
+    faces = anim.faces.astype(np.uint16)
+    delta = np.zeros_like(pos)
+    delta[pos[:, 1] > 0, 1] = 0.8
+    times = (np.arange(n_keys, dtype=np.float32) / fps)
+    weights = np.linspace(0, 1, n_keys, dtype=np.float32)
+    chunks, views, accessors = [], [], []
+    offset = 0
+
+    def add(arr: np.ndarray, acc: dict) -> None:
+        nonlocal offset
+        raw = arr.tobytes()
+        raw += b"\0" * (-len(raw) % 4)
+        views.append({"buffer": 0, "byteOffset": offset, "byteLength": arr.nbytes})
+        accessors.append({"bufferView": len(views) - 1, **acc})
+        chunks.append(raw)
+        offset += len(raw)
+
+    add(pos, {"componentType": 5126, "count": len(pos), "type": "VEC3",
+              "min": pos.min(0).tolist(), "max": pos.max(0).tolist()})
+    add(faces.reshape(-1), {"componentType": 5123, "count": faces.size, "type": "SCALAR"})
+    add(delta, {"componentType": 5126, "count": len(delta), "type": "VEC3",
+                "min": delta.min(0).tolist(), "max": delta.max(0).tolist()})
+    add(times, {"componentType": 5126, "count": n_keys, "type": "SCALAR",
+                "min": [float(times.min())], "max": [float(times.max())]})
+    add(weights, {"componentType": 5126, "count": n_keys, "type": "SCALAR"})
+    binary = b"".join(chunks)
+    doc = {
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+        "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.6, 0.5, 1]}}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0,
+                                    "targets": [{"POSITION": 2}]}], "weights": [0.0]}],
+        "animations": [{"samplers": [{"input": 3, "output": 4, "interpolation": "LINEAR"}],
+                        "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}]}],
+        "buffers": [{"byteLength": len(binary)}], "bufferViews": views, "accessors": accessors,
+    }
+    js = json.dumps(doc).encode()
+    js += b" " * (-len(js) % 4)
+    body = struct.pack("<II", len(js), 0x4E4F534A) + js + struct.pack("<II", len(binary), 0x004E4942) + binary
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
+
+
+@pytest.fixture(scope="session")
+def tiny_glb(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("inputs") / "cube.glb"
+    path.write_bytes(glb_bytes())
+    return path
+
+
+@pytest.fixture(scope="session")
+def sample_file(tiny_glb) -> Path:
+    """The bundled sample if present, else the tiny cube (so the UI tests run before the sample lands)."""
+    return SAMPLE if SAMPLE.is_file() else tiny_glb
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="session")
+def redis_url(tmp_path_factory):
+    """A real redis-server on a free loopback port (skipped without it locally; a failure under CI)."""
+    exe = shutil.which("redis-server")
+    if not exe:
+        if os.environ.get("CI"):
+            pytest.fail("redis-server is not installed but CI is set: .ci/run must install it")
+        pytest.skip("redis-server not installed (apt-get install redis-server)")
+    port = free_port()
+    folder = tmp_path_factory.mktemp("redis")
+    proc = subprocess.Popen([exe, "--port", str(port), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no",
+                             "--dir", str(folder)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    import redis
+
+    client = redis.Redis(port=port)
+    for _ in range(100):
+        try:
+            client.ping()
+            break
+        except redis.ConnectionError:
+            time.sleep(0.05)
+    else:
+        proc.kill()
+        pytest.fail("redis-server did not start")
+    yield f"redis://127.0.0.1:{port}/0"
+    proc.terminate()
+    proc.wait(10)
+
+
+@pytest.fixture(scope="session")
+def rq_worker(redis_url):
+    """One RQ worker process (`facesvg worker`) working the queue for the whole session."""
+    import sys
+
+    env = dict(os.environ, PYOPENGL_PLATFORM="egl")
+    root = Path(__file__).resolve().parents[2]
+    proc = subprocess.Popen([sys.executable, "-m", "converter.cli", "worker", "--queue", redis_url], cwd=root,
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    yield proc
+    proc.terminate()
+    try:
+        proc.wait(20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+
+
+def make_app(tmp_path: Path, backend: str, redis_url: str | None = None, **config):
+    """An app with its own instance folder on the named backend ('embedded' or 'rq')."""
+    from webapp import create_app
+
+    base = {"INSTANCE_PATH": str(tmp_path / "instance"), "TESTING": True, "WTF_CSRF_ENABLED": False,
+            "FACESVG_EXECUTOR": "thread", "FACESVG_WORKERS": 2, "FACESVG_PREVIEW_FRAMES": 4}
+    if backend == "rq":
+        import redis
+
+        redis.Redis.from_url(redis_url).flushdb()
+        base["FACESVG_QUEUE"] = redis_url
+    base.update(config)
+    return create_app(base)
+
+
+@pytest.fixture(params=["embedded", "rq"])
+def app(request, tmp_path):
+    """The app on each backend (same tests for both)."""
+    url = None
+    if request.param == "rq":
+        url = request.getfixturevalue("redis_url")
+        request.getfixturevalue("rq_worker")
+    application = make_app(tmp_path, request.param, url)
+    yield application
+    application.extensions["facesvg_queue"].close()
+
+
+@pytest.fixture
+def client(app):
+    return app.test_client()
+
+
+def wait_job(client, job_id: str, timeout: float = 120.0) -> dict:
+    """Poll the API until the job leaves queued/running; returns its JSON."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        data = client.get(f"/api/v1/jobs/{job_id}").get_json()
+        if data["state"] in ("done", "failed", "cancelled"):
+            return data
+        time.sleep(0.1)
+    raise AssertionError(f"job {job_id} did not finish in {timeout} s: {data}")
+
+
+class LiveServer:
+    """A waitress server for an app in a background thread on 127.0.0.1 and a free port."""
+
+    def __init__(self, app) -> None:
+        from waitress.server import create_server
+
+        self.app = app
+        self.server = create_server(app, host="127.0.0.1", port=free_port(), threads=8)
+        self.url = f"http://127.0.0.1:{self.server.effective_port}"
+        self.thread = threading.Thread(target=self.server.run, daemon=True)
+        self.thread.start()
+
+    def close(self) -> None:
+        self.server.close()
+        self.app.extensions["facesvg_queue"].close()

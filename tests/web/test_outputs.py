@@ -1,0 +1,55 @@
+"""Other output kinds and the command line: the fap2d package through the API, `facesvg serve/worker`."""
+
+from __future__ import annotations
+
+import io
+import re
+import subprocess
+import sys
+import urllib.parse
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from conftest import ROOT, SAMPLE, SHARED_DATA
+from web.conftest import wait_job
+
+FAP = SHARED_DATA / "mpeg4" / "xface" / "joy.fap"
+FDP = ROOT / "samples" / "face.fdp.json"
+
+
+@pytest.mark.parametrize("app", ["embedded"], indirect=True)
+def test_fap2d_package_job_embeds_the_player(client):
+    if not (FAP.is_file() and FDP.is_file() and SAMPLE.is_file()):
+        pytest.fail("the fap2d test needs samples/face.glb, samples/face.fdp.json and the shared Xface FAP files")
+    r = client.post("/api/v1/jobs", data={
+        "file": (io.BytesIO(SAMPLE.read_bytes()), "face.glb"), "to": "fap2d", "size": "128", "end": "12",
+        "fap": (io.BytesIO(FAP.read_bytes()), "joy.fap"), "fdp": (io.BytesIO(FDP.read_bytes()), "face.fdp.json"),
+    }, content_type="multipart/form-data")
+    assert r.status_code == 202, r.get_json()
+    job = wait_job(client, r.get_json()["id"], timeout=240)
+    assert job["state"] == "done", job["error"]
+    assert set(job["links"]["results"]) == {"fap2d", "report"}
+    pkg = client.get(job["links"]["result"])
+    assert pkg.mimetype == "application/zip" and "attachment" in pkg.headers["Content-Disposition"]
+    names = zipfile.ZipFile(io.BytesIO(pkg.data)).namelist()
+    assert "manifest.json" in names
+    html = client.get(job["links"]["page"]).get_data(as_text=True)
+    src = re.search(r'<iframe id="fap2d-view"[^>]* src="([^"]+)"', html).group(1).replace("&amp;", "&")
+    url = urllib.parse.urlsplit(src)
+    assert url.path == "/static/fap2d.html"
+    assert urllib.parse.parse_qs(url.query)["src"] == [job["links"]["results"]["fap2d"]]
+    assert client.get(job["links"]["previews"]["0"]).mimetype == "image/png"
+    # the prerender follows the FAP stream (the 3D face it drives), frame for frame with the package
+    assert job["result"]["frames"] == job["result"]["report"]["counts"]["frames"] > 12
+
+
+def test_cli_registers_serve_and_worker():
+    from converter.cli import build_parser
+
+    args = build_parser().parse_args(["serve", "--host", "0.0.0.0", "--port", "8123", "--workers", "3"])
+    assert (args.host, args.port, args.workers) == ("0.0.0.0", 8123, 3)
+    out = subprocess.run([sys.executable, "-m", "converter.cli", "worker", "--queue", "embedded"],
+                         capture_output=True, text=True, cwd=Path(ROOT))
+    assert out.returncode == 2 and "redis://" in out.stderr and "Traceback" not in out.stderr

@@ -1,0 +1,162 @@
+"""REST API /api/v1 (JSON): submit, inspect, fetch results of, and delete conversion jobs."""
+
+from __future__ import annotations
+
+from flask import Blueprint, abort, current_app, jsonify, request, send_file, url_for
+
+from converter.errors import InputError
+from webapp.jobstore import DONE, Job
+from webapp.openapi import openapi_document
+from webapp.storage import RESULT_FILES, is_job_id
+from webapp.submit import create_job, download_stem
+
+api = Blueprint("api", __name__)
+ATTACHMENT_KINDS = ("svgz", "fap2d")  # never shown inline by a browser
+
+
+def queue():
+    """The app's job queue."""
+    return current_app.extensions["facesvg_queue"]
+
+
+def find_job(job_id: str) -> Job:
+    """The job or a 404."""
+    job = queue().get(job_id) if is_job_id(job_id) else None
+    if job is None:
+        abort(404, description=f"no job {job_id!r}; it may have been deleted or cleaned up.")
+    return job
+
+
+def job_json(job: Job) -> dict:
+    """The public view of a job, with links."""
+    data = {
+        "id": job.id,
+        "state": job.state,
+        "stage": job.stage,
+        "progress": round(job.progress, 4),
+        "percent": int(job.progress * 100),
+        "error": job.message if job.state == "failed" else None,
+        "filename": job.filename,
+        "input_kind": job.kind,
+        "options": job.options,
+        "created": job.created,
+        "started": job.started,
+        "finished": job.finished,
+        "links": {
+            "self": url_for("api.get_job", job_id=job.id),
+            "page": url_for("pages.job_page", job_id=job.id),
+        },
+    }
+    if job.state == DONE:
+        kinds = queue().storage.available(job.id)
+        data["result"] = job.result
+        data["links"]["result"] = url_for("api.get_result", job_id=job.id)
+        data["links"]["results"] = {k: url_for("api.get_result_kind", job_id=job.id, kind=k) for k in kinds}
+        data["links"]["previews"] = {
+            str(k): url_for("api.get_preview", job_id=job.id, frame=k) for k in job.result.get("preview_frames", [])
+        }
+    return data
+
+
+@api.get("/health")
+def health():
+    """Liveness and the queue backend in use."""
+    return jsonify(status="ok", backend=queue().name)
+
+
+@api.get("/openapi.json")
+def openapi():
+    """The OpenAPI 3.1 description of this API."""
+    return jsonify(openapi_document())
+
+
+@api.get("/jobs")
+def list_jobs():
+    """Recent jobs, newest first."""
+    try:
+        limit = min(max(int(request.args.get("limit", 50)), 1), 500)
+    except ValueError:
+        abort(400, description="limit must be a whole number between 1 and 500.")
+    return jsonify(jobs=[job_json(j) for j in queue().recent(limit)])
+
+
+@api.post("/jobs")
+def post_job():
+    """Create a job from a multipart upload (field 'file', or sample=1) and option fields."""
+    current_app.extensions["facesvg_cleanup"].maybe_run()
+    try:
+        job = create_job(queue(), current_app.config, request.form, request.files, strict=True)
+    except InputError as exc:
+        return jsonify(error=str(exc), status=400), 400
+    response = jsonify(job_json(queue().get(job.id) or job))
+    response.status_code = 202
+    response.headers["Location"] = url_for("api.get_job", job_id=job.id)
+    return response
+
+
+@api.get("/jobs/<job_id>")
+def get_job(job_id: str):
+    """State, stage, progress, error and links of a job."""
+    return jsonify(job_json(find_job(job_id)))
+
+
+@api.delete("/jobs/<job_id>")
+def delete_job(job_id: str):
+    """Cancel a queued job or delete a finished one (204); a running job is asked to stop (202)."""
+    find_job(job_id)
+    outcome = queue().delete(job_id)
+    if outcome is None:
+        abort(404, description=f"no job {job_id!r}.")
+    if outcome == "cancelling":
+        return jsonify(id=job_id, state="cancelling"), 202
+    return "", 204
+
+
+def _finished_job(job_id: str) -> Job:
+    job = find_job(job_id)
+    if job.state != DONE:
+        detail = job.message if job.state == "failed" else f"the job is {job.state}"
+        abort(409, description=f"no result: {detail}.")
+    return job
+
+
+@api.get("/jobs/<job_id>/result")
+def get_result(job_id: str):
+    """The main output: the SVG, or the fap2d package."""
+    job = _finished_job(job_id)
+    kinds = queue().storage.available(job.id)
+    main = "fap2d" if "fap2d" in kinds else "svg"
+    return _send(job, main)
+
+
+@api.get("/jobs/<job_id>/result/<kind>")
+def get_result_kind(job_id: str, kind: str):
+    """One output by kind: svg, svgz, fap2d, report."""
+    if kind not in RESULT_FILES:
+        abort(404, description=f"unknown result kind {kind!r}; use one of {', '.join(RESULT_FILES)}.")
+    return _send(_finished_job(job_id), kind)
+
+
+@api.get("/jobs/<job_id>/preview/<int:frame>")
+def get_preview(job_id: str, frame: int):
+    """The 3D prerender (PNG) of one frame listed in result.preview_frames."""
+    job = _finished_job(job_id)
+    path = queue().storage.preview_path(job.id, frame)
+    if path is None:
+        abort(404, description=f"no prerender of frame {frame}; see result.preview_frames.")
+    return send_file(path, mimetype="image/png", max_age=3600)
+
+
+def _send(job: Job, kind: str):
+    path = queue().storage.result_path(job.id, kind)
+    if path is None:
+        abort(404, description=f"this job has no {kind} output.")
+    name, media = RESULT_FILES[kind]
+    suffix = {"svg": ".svg", "svgz": ".svgz", "fap2d": ".fap2d.zip", "report": ".report.json"}[kind]
+    download = kind in ATTACHMENT_KINDS or request.args.get("download") in ("1", "true")
+    response = send_file(path, mimetype=media, as_attachment=download,
+                         download_name=download_stem(job) + suffix, max_age=0)
+    if kind == "svg":  # generated SVG shown inline: no scripts, no external loads
+        response.headers["Content-Security-Policy"] = "default-src 'none'; style-src 'unsafe-inline'; img-src data:"
+    return response
+

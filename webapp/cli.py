@@ -1,0 +1,74 @@
+"""`facesvg serve` (the web UI on waitress) and `facesvg worker` (an RQ worker for the Redis backend)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+
+
+def register_cli(subparsers) -> None:
+    """Add the serve and worker subcommands to the facesvg parser."""
+    p = subparsers.add_parser("serve", help="serve the web UI (waitress)")
+    p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=5000, help="port (default 5000)")
+    p.add_argument("--workers", type=int, default=None, help="conversion worker processes (default 2)")
+    p.add_argument("--threads", type=int, default=8, help="HTTP request threads (default 8)")
+    p.add_argument("--queue", help="'embedded' (default) or redis://host:port/db (env FACESVG_QUEUE)")
+    p.add_argument("--instance", help="instance folder for the job table, results and secret key")
+    p.set_defaults(func=cmd_serve)
+
+    p = subparsers.add_parser("worker", help="run conversion jobs from the Redis queue (RQ backend)")
+    p.add_argument("--queue", default=os.environ.get("FACESVG_QUEUE"), help="redis://host:port/db")
+    p.add_argument("--burst", action="store_true", help="exit when the queue is empty")
+    p.set_defaults(func=cmd_worker)
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    """Start the web UI with waitress (a production WSGI server) on host:port."""
+    import waitress
+
+    from webapp import create_app
+
+    config = {}
+    if args.workers is not None:
+        config["FACESVG_WORKERS"] = args.workers
+    if args.queue:
+        config["FACESVG_QUEUE"] = args.queue
+    if args.instance:
+        config["INSTANCE_PATH"] = os.path.abspath(args.instance)
+    app = create_app(config)
+    print(f"facesvg web UI on http://{args.host}:{args.port} ({app.extensions['facesvg_queue'].name} queue)",
+          flush=True)
+    signal.signal(signal.SIGTERM, _exit)
+    try:
+        waitress.serve(app, host=args.host, port=args.port, threads=args.threads, ident="facesvg")
+    except KeyboardInterrupt:
+        pass
+    finally:
+        # Stop the workers with the server; jobs they were running are re-queued when it starts again.
+        app.extensions["facesvg_queue"].close(wait=False)
+    return 0
+
+
+def _exit(signum, frame) -> None:
+    raise KeyboardInterrupt()
+
+
+def cmd_worker(args: argparse.Namespace) -> int:
+    """Work the facesvg RQ queue until stopped (or until empty with --burst)."""
+    from converter.errors import InputError
+
+    if not args.queue or not args.queue.startswith(("redis://", "rediss://", "unix://")):
+        raise InputError("give the Redis URL with --queue redis://host:port/0 (or set FACESVG_QUEUE).")
+    from redis import Redis
+    from rq import Queue, Worker
+
+    # Import the pipeline once here so each job's forked work horse starts warm (no GL context exists yet).
+    import webapp.runner  # noqa: F401
+    from converter import convert, extract, render  # noqa: F401
+
+    render._pyrender()
+    conn = Redis.from_url(args.queue)
+    Worker([Queue("facesvg", connection=conn)], connection=conn).work(burst=args.burst)
+    return 0

@@ -1,0 +1,135 @@
+"""The OpenAPI 3.1 document of /api/v1 (kept next to the routes; a test checks that both match)."""
+
+from __future__ import annotations
+
+from dataclasses import MISSING, fields
+
+from converter.options import ConversionOptions
+from webapp.storage import RESULT_FILES
+
+FILE_FIELDS = {
+    "file": "the animation: glTF/GLB, a zip of numbered OBJ frames, or an OBJ mesh (with 'cache')",
+    "cache": "PC2 or MDD point cache for an OBJ mesh",
+    "fap": "MPEG-4 FAP stream (drives the face; required with to=fap2d)",
+    "fdp": "feature-point definition of the face (JSON or Xface .fdp; required with to=fap2d)",
+    "clone_target": "a face file to clone the animation onto",
+    "clone_keys": "zip of key-model pairs for clone_method=example",
+    "correspondences": "user correspondences for dense cloning",
+}
+SKIP = {"fap", "fdp", "clone_target", "clone_keys", "correspondences"}
+
+
+def _option_schema() -> dict:
+    props = {}
+    for f in fields(ConversionOptions):
+        if f.name in SKIP:
+            continue
+        t = str(f.type)
+        kind = "boolean" if "bool" in t else "integer" if "int" in t else "number" if "float" in t else "string"
+        prop = {"type": kind}
+        if f.default is not MISSING and f.default is not None:
+            prop["default"] = f.default
+        props[f.name] = prop
+    props["to"]["enum"] = ["svg", "fap2d"]
+    props["shading"]["enum"] = ["flat", "gouraud", "gouraud-chapter"]
+    props["clone_method"]["enum"] = ["example", "frames", "dense"]
+    return props
+
+
+def _error(description: str) -> dict:
+    return {"description": description,
+            "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Error"}}}}
+
+
+def _job_response(description: str) -> dict:
+    return {"description": description,
+            "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Job"}}}}
+
+
+JOB_ID = {"name": "job_id", "in": "path", "required": True, "schema": {"type": "string", "pattern": "^[0-9a-f]{32}$"}}
+
+
+def openapi_document() -> dict:
+    """The whole OpenAPI document."""
+    upload_props = {k: {"type": "string", "format": "binary", "description": v} for k, v in FILE_FIELDS.items()}
+    upload_props["sample"] = {"type": "string", "enum": ["1"], "description": "convert the bundled sample instead"}
+    upload_props.update(_option_schema())
+    return {
+        "openapi": "3.1.0",
+        "info": {"title": "facesvg API", "version": "1",
+                 "description": "Convert 3D facial animation to animated SVG or an MPEG-4 2D package. Jobs run "
+                                "in the background; poll GET /jobs/{job_id} until state is done or failed. "
+                                "DELETE cancels a queued job, removes a finished one, and asks a running one to "
+                                "stop (202; it is removed when its worker reaches the next progress step)."},
+        "servers": [{"url": "/api/v1"}],
+        "paths": {
+            "/health": {"get": {"summary": "Liveness and queue backend", "operationId": "health",
+                                "responses": {"200": {"description": "the server is up"}}}},
+            "/openapi.json": {"get": {"summary": "This document", "operationId": "openapi",
+                                      "responses": {"200": {"description": "OpenAPI document"}}}},
+            "/jobs": {
+                "get": {"summary": "Recent jobs, newest first", "operationId": "listJobs",
+                        "parameters": [{"name": "limit", "in": "query", "schema": {"type": "integer",
+                                                                                     "minimum": 1, "maximum": 500}}],
+                        "responses": {"200": {"description": "jobs", "content": {"application/json": {"schema": {
+                            "type": "object", "properties": {"jobs": {"type": "array", "items": {
+                                "$ref": "#/components/schemas/Job"}}}}}}},
+                            "400": _error("bad limit")}},
+                "post": {"summary": "Submit a conversion job", "operationId": "createJob",
+                         "requestBody": {"required": True, "content": {"multipart/form-data": {"schema": {
+                             "type": "object", "properties": upload_props}}}},
+                         "responses": {"202": _job_response("queued; Location names the job"),
+                                       "400": _error("bad input or options (message says what to fix)"),
+                                       "413": _error("upload larger than the limit")}},
+            },
+            "/jobs/{job_id}": {
+                "parameters": [JOB_ID],
+                "get": {"summary": "State, stage, progress and error of a job", "operationId": "getJob",
+                        "responses": {"200": _job_response("the job"), "404": _error("no such job")}},
+                "delete": {"summary": "Cancel (queued), delete (finished) or stop (running) a job",
+                           "operationId": "deleteJob",
+                           "responses": {"204": {"description": "cancelled or deleted"},
+                                         "202": {"description": "running; it stops at its next progress step"},
+                                         "404": _error("no such job")}},
+            },
+            "/jobs/{job_id}/result": {
+                "parameters": [JOB_ID],
+                "get": {"summary": "The main output (SVG, or the fap2d package)", "operationId": "getResult",
+                        "parameters": [{"name": "download", "in": "query", "schema": {"type": "string"}}],
+                        "responses": {"200": {"description": "the file", "content": {
+                            "image/svg+xml": {}, "application/zip": {}}},
+                            "404": _error("no such job"), "409": _error("the job is not done")}},
+            },
+            "/jobs/{job_id}/result/{kind}": {
+                "parameters": [JOB_ID, {"name": "kind", "in": "path", "required": True,
+                                        "schema": {"type": "string", "enum": list(RESULT_FILES)}}],
+                "get": {"summary": "One output by kind", "operationId": "getResultKind",
+                        "parameters": [{"name": "download", "in": "query", "schema": {"type": "string"}}],
+                        "responses": {"200": {"description": "the file"},
+                                      "404": _error("no such job or kind"), "409": _error("the job is not done")}},
+            },
+            "/jobs/{job_id}/preview/{frame}": {
+                "parameters": [JOB_ID, {"name": "frame", "in": "path", "required": True,
+                                        "schema": {"type": "integer", "minimum": 0}}],
+                "get": {"summary": "3D prerender PNG of a frame listed in result.preview_frames",
+                        "operationId": "getPreview",
+                        "responses": {"200": {"description": "PNG", "content": {"image/png": {}}},
+                                      "404": _error("no such job or frame"), "409": _error("not done")}},
+            },
+        },
+        "components": {"schemas": {
+            "Error": {"type": "object", "properties": {"error": {"type": "string"}, "status": {"type": "integer"}}},
+            "Job": {"type": "object", "properties": {
+                "id": {"type": "string"},
+                "state": {"type": "string", "enum": ["queued", "running", "done", "failed", "cancelling",
+                                                     "cancelled"]},
+                "stage": {"type": "string"}, "progress": {"type": "number"}, "percent": {"type": "integer"},
+                "error": {"type": ["string", "null"]}, "filename": {"type": "string"},
+                "input_kind": {"type": "string"}, "options": {"type": "object", "properties": _option_schema()},
+                "created": {"type": "number"}, "started": {"type": ["number", "null"]},
+                "finished": {"type": ["number", "null"]},
+                "result": {"type": "object", "description": "report, frames, fps, duration, preview_frames, "
+                                                            "outputs (bytes per kind)"},
+                "links": {"type": "object"}}},
+        }},
+    }

@@ -1,0 +1,190 @@
+"""What a worker does with one job (both backends): claim it, convert, write results and previews, record."""
+
+from __future__ import annotations
+
+import gzip
+import io
+import json
+import logging
+import os
+import time
+import traceback
+
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
+import numpy as np
+
+from converter.errors import FacesvgError
+from webapp.jobstore import CANCELLING, DONE, FAILED, RUNNING, Job, JobStore, open_store
+from webapp.storage import RESULT_FILES, Storage
+
+log = logging.getLogger("facesvg.webapp")
+PREVIEW_MAX_SIZE = 512  # the 3D prerender is drawn at most this wide (same camera framing, smaller viewport)
+CONVERT_SHARE = 0.8  # share of the progress bar given to the conversion; then verification and the prerender
+VERIFY_SHARE = 0.05
+
+
+class JobCancelled(Exception):
+    """The job was asked to stop (DELETE while running)."""
+
+
+def run_job(job_id: str, store_url: str, storage_root: str, preview_frames: int = 48) -> str:
+    """Run one queued job to its end state; returns the final state. Entry point of every worker."""
+    store = open_store(store_url)
+    try:
+        return _run(store, Storage(storage_root), job_id, preview_frames)
+    finally:
+        store.close()
+
+
+def _run(store: JobStore, storage: Storage, job_id: str, preview_frames: int) -> str:
+    if not store.claim(job_id):
+        return "skipped"  # cancelled, deleted, or taken by another worker
+    job = store.get(job_id)
+    progress = ProgressRecorder(store, job_id)
+    try:
+        result = perform(job, storage, progress, preview_frames)
+    except JobCancelled:
+        store.remove(job_id)
+        storage.delete(job_id)
+        return "cancelled"
+    except FacesvgError as exc:
+        return _fail(store, storage, job_id, str(exc))
+    except Exception as exc:  # a bug or a resource failure: keep the server alive, tell the user plainly
+        log.error("job %s failed:\n%s", job_id, traceback.format_exc())
+        return _fail(store, storage, job_id, f"the conversion failed unexpectedly ({type(exc).__name__}: {exc}).")
+    if store.transition(job_id, (RUNNING,), state=DONE, stage="done", progress=1.0, finished=time.time(),
+                        result=result):
+        return DONE
+    store.remove(job_id)  # cancelled while finishing
+    storage.delete(job_id)
+    return "cancelled"
+
+
+def _fail(store: JobStore, storage: Storage, job_id: str, message: str) -> str:
+    if store.transition(job_id, (RUNNING,), state=FAILED, stage="failed", message=message, finished=time.time()):
+        return FAILED
+    store.remove(job_id)
+    storage.delete(job_id)
+    return "cancelled"
+
+
+class ProgressRecorder:
+    """Progress callback that writes (stage, fraction) to the store at most every 0.2 s and checks for cancel."""
+
+    def __init__(self, store: JobStore, job_id: str, interval: float = 0.2) -> None:
+        self.store, self.job_id, self.interval = store, job_id, interval
+        self.last = 0.0
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        now = time.monotonic()
+        if now - self.last < self.interval and fraction < 1.0:
+            return
+        self.last = now
+        fraction = float(min(max(fraction, 0.0), 1.0))
+        if not self.store.transition(self.job_id, (RUNNING,), stage=stage, progress=round(fraction, 4)):
+            job = self.store.get(self.job_id)
+            if job is None or job.state == CANCELLING:
+                raise JobCancelled()
+
+
+def job_options(job: Job, storage: Storage):
+    """ConversionOptions of a job: its scalar options plus the stored extra files as paths."""
+    from converter.options import ConversionOptions
+
+    data = dict(job.options)
+    inputs = storage.inputs(job.id)
+    for role, name in job.files.items():
+        if role not in ("input", "cache"):
+            data[role] = str(inputs / name)
+    return ConversionOptions.from_mapping(data)
+
+
+def perform(job: Job, storage: Storage, progress, preview_frames: int = 48) -> dict:
+    """Convert the job's input, write every output and the 3D prerenders; returns the result summary."""
+    from converter.convert import convert, write_atomic
+
+    options = job_options(job, storage)
+    inputs, out = storage.inputs(job.id), storage.out(job.id)
+    cache = inputs / job.files["cache"] if "cache" in job.files else None
+    prepared = []
+    result = convert(inputs / job.files["input"], options, progress=lambda s, f: progress(s, CONVERT_SHARE * f),
+                     cache=cache, on_prepared=prepared.append)
+    anim = prepared[0]
+    if options.to == "fap2d":  # the package plays the FAP stream: prerender the 3D face that stream drives
+        from converter import mpeg4
+
+        anim = mpeg4.drive(anim, options.fap, options.fdp, fps=options.fps)
+    outputs: dict[str, bytes] = {}
+    if options.to == "fap2d":
+        outputs["fap2d"] = result.data
+    else:
+        svg = gzip.decompress(result.data) if options.svgz else result.data
+        outputs["svg"] = svg
+        outputs["svgz"] = result.data if options.svgz else gzip.compress(svg, mtime=0)
+    report = result.report.to_json()
+    if "svg" in outputs:
+        progress("verify", CONVERT_SHARE)
+        report["figures"].update(fidelity(outputs["svg"], anim))
+    outputs["report"] = json.dumps(report, indent=1, sort_keys=True).encode()
+    for kind, data in outputs.items():
+        write_atomic(out / RESULT_FILES[kind][0], data)
+    progress("prerender", CONVERT_SHARE + VERIFY_SHARE)
+    still = options.frame is not None and options.to == "svg"
+    frames = write_previews(anim, options, out, preview_frames, progress, only=options.frame if still else None)
+    progress("done", 1.0)
+    return {
+        "report": report,
+        "frames": int(anim.n_frames),
+        "fps": float(anim.fps),
+        "duration": float(anim.n_frames / anim.fps),
+        "size": int(options.size),
+        "preview_frames": frames,
+        "still": options.frame if still else None,  # the SVG shows this one frame, not the animation
+        "outputs": {k: len(v) for k, v in outputs.items()},
+        "media_type": result.media_type,
+    }
+
+
+def fidelity(svg: bytes, anim) -> dict:
+    """The verifier's figures for the SVG against the exact projection (empty if it cannot measure this SVG)."""
+    try:
+        from converter.verify import verify_animation
+
+        v = verify_animation(svg, anim)
+    except Exception as exc:  # an optional measurement: a verifier limit must not fail the user's job
+        log.warning("verification skipped: %s: %s", type(exc).__name__, exc)
+        return {}
+    return {"max_deviation_px": float(v.max_px), "mean_deviation_px": float(v.mean_px),
+            "visibility_mismatches": int(v.visibility_mismatches), "tolerance_px": float(v.tolerance),
+            "within_tolerance": bool(v.ok)}
+
+
+def preview_indices(n_frames: int, limit: int) -> list[int]:
+    """At most limit frame indices spread evenly over the animation, always including the first and last."""
+    if n_frames <= limit:
+        return list(range(n_frames))
+    return sorted(set(np.round(np.linspace(0, n_frames - 1, max(limit, 2))).astype(int).tolist()))
+
+
+def write_previews(anim, options, out, limit: int, progress, only: int | None = None) -> list[int]:
+    """The 3D prerender (pyrender, same camera framing as the 2D output) of chosen frames (or one) as PNGs."""
+    from PIL import Image
+
+    from converter.extract import extract, fit_camera
+
+    frames = preview_indices(anim.n_frames, limit) if only is None else [only]
+    if not frames:
+        return []
+    camera = fit_camera(anim, min(options.size, PREVIEW_MAX_SIZE), options.yaw, options.pitch, options.fov,
+                        options.ortho)
+    sheet = extract(anim, camera, neutral=0, occlusion=False, reference_frames=tuple(frames))
+    from converter.convert import write_atomic
+
+    for i, k in enumerate(frames):
+        buf = io.BytesIO()
+        Image.fromarray(sheet.references[k]).save(buf, format="PNG", optimize=False)
+        write_atomic(out / f"preview-{k}.png", buf.getvalue())
+        done = CONVERT_SHARE + VERIFY_SHARE
+        progress("prerender", done + (1 - done) * (i + 1) / len(frames))
+    return frames

@@ -1,0 +1,97 @@
+"""Turn a submitted form (HTML or API) into a stored, checked, queued job."""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import fields
+from pathlib import Path
+
+from werkzeug.datastructures import FileStorage, ImmutableMultiDict
+from werkzeug.utils import secure_filename
+
+from converter.errors import InputError
+from converter.options import ConversionOptions
+from webapp.jobstore import Job
+from webapp.storage import new_job_id
+from webapp.uploads import EXTRA_FIELDS, check_extra, check_main_input, stored_name
+
+FILE_OPTIONS = ("fap", "fdp", "clone_target", "clone_keys", "correspondences")
+OPTION_FIELDS = tuple(f.name for f in fields(ConversionOptions) if f.name not in FILE_OPTIONS)
+CONTROL_FIELDS = ("csrf_token", "sample", "file", *EXTRA_FIELDS)
+
+
+def parse_options(form: ImmutableMultiDict, strict: bool) -> dict:
+    """Scalar options from a form (the last value of each field wins, so a hidden 0 + checkbox 1 works)."""
+    data = {}
+    for key in form.keys():
+        name = key.replace("-", "_")
+        if name in OPTION_FIELDS:
+            data[name] = form.getlist(key)[-1]
+        elif strict and name not in CONTROL_FIELDS:
+            raise InputError(f"unknown field {key!r}; see /api/v1/openapi.json for the accepted fields.")
+    options = ConversionOptions.from_mapping(data)
+    return {k: v for k, v in options.to_json().items() if k in OPTION_FIELDS}
+
+
+def _present(upload: FileStorage | None) -> bool:
+    return upload is not None and bool(upload.filename)
+
+
+def create_job(queue, config, form: ImmutableMultiDict, files: ImmutableMultiDict, strict: bool = False) -> Job:
+    """Validate options and uploads, store them under generated names, queue the job; InputError if bad."""
+    options = parse_options(form, strict)
+    use_sample = form.get("sample", "") in ("1", "true", "on", "yes")
+    upload = files.get("file")
+    if not use_sample and not _present(upload):
+        raise InputError("choose an animation file to upload (glTF/GLB, a zip of OBJ frames, or OBJ + point "
+                         "cache), or try the bundled sample.")
+    if options.get("to") == "fap2d" and not (_present(files.get("fap")) and _present(files.get("fdp"))):
+        raise InputError("the MPEG-4 2D package needs a FAP stream and an FDP file; add both or choose SVG.")
+    storage = queue.storage
+    job_id = new_job_id()
+    inputs = storage.inputs(job_id)
+    max_unzipped = int(config["FACESVG_MAX_UNZIPPED_MB"]) << 20
+    try:
+        if use_sample:
+            sample = Path(config["FACESVG_SAMPLE"])
+            if not sample.is_file():
+                raise InputError("the bundled sample is missing from this installation; upload a file instead.")
+            tmp = inputs / "upload.tmp"
+            shutil.copyfile(sample, tmp)
+            filename = sample.name
+        else:
+            tmp = inputs / "upload.tmp"
+            upload.save(tmp)
+            filename = upload.filename
+        kind = check_main_input(tmp, max_unzipped)
+        stored = {"input": stored_name("input", filename, kind)}
+        tmp.rename(inputs / stored["input"])
+        for role in EXTRA_FIELDS:
+            extra = files.get(role)
+            if not _present(extra):
+                continue
+            name = stored_name(role, extra.filename)
+            extra.save(inputs / name)
+            check_extra(inputs / name, role, max_unzipped)
+            if role == "clone_target":
+                check_main_input(inputs / name, max_unzipped)
+            stored[role] = name
+        if kind == "obj" and "cache" not in stored:
+            raise InputError("an OBJ mesh needs its animation: add a PC2 or MDD point cache file.")
+    except BaseException:
+        storage.delete(job_id)
+        raise
+    job = Job(id=job_id, filename=display_name(filename), kind=kind, options=options, files=stored)
+    queue.submit(job)
+    return job
+
+
+def display_name(filename: str) -> str:
+    """The uploaded name trimmed for display (escaped by the templates; never used as a path)."""
+    name = (filename or "upload").replace("\\", "/").rsplit("/", 1)[-1]
+    return name[:120]
+
+
+def download_stem(job: Job) -> str:
+    """A safe file stem for downloads, from the uploaded name."""
+    return secure_filename(Path(job.filename).stem)[:60] or "face"
