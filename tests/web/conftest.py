@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import socket
-import struct
 import subprocess
 import threading
 import time
@@ -21,48 +19,16 @@ SMALL = {"size": "64", "occlusion": "0"}  # keeps conversions in tests fast
 
 
 def glb_bytes(n_keys: int = 4, fps: float = 10.0) -> bytes:
-    """A cube with one morph target (top face rises) animated by a LINEAR weights track: a minimal glTF."""
-    anim = cube_animation(1)
-    pos = anim.frames[0].astype(np.float32)
-    faces = anim.faces.astype(np.uint16)
+    """A cube whose top face rises over n_keys frames, written by the product's own glTF writer."""
+    from converter.animation import FaceAnimation
+    from converter.formats.gltf_write import write_glb
+
+    cube = cube_animation(1)
+    pos = cube.frames[0]
     delta = np.zeros_like(pos)
     delta[pos[:, 1] > 0, 1] = 0.8
-    times = (np.arange(n_keys, dtype=np.float32) / fps)
-    weights = np.linspace(0, 1, n_keys, dtype=np.float32)
-    chunks, views, accessors = [], [], []
-    offset = 0
-
-    def add(arr: np.ndarray, acc: dict) -> None:
-        nonlocal offset
-        raw = arr.tobytes()
-        raw += b"\0" * (-len(raw) % 4)
-        views.append({"buffer": 0, "byteOffset": offset, "byteLength": arr.nbytes})
-        accessors.append({"bufferView": len(views) - 1, **acc})
-        chunks.append(raw)
-        offset += len(raw)
-
-    add(pos, {"componentType": 5126, "count": len(pos), "type": "VEC3",
-              "min": pos.min(0).tolist(), "max": pos.max(0).tolist()})
-    add(faces.reshape(-1), {"componentType": 5123, "count": faces.size, "type": "SCALAR"})
-    add(delta, {"componentType": 5126, "count": len(delta), "type": "VEC3",
-                "min": delta.min(0).tolist(), "max": delta.max(0).tolist()})
-    add(times, {"componentType": 5126, "count": n_keys, "type": "SCALAR",
-                "min": [float(times.min())], "max": [float(times.max())]})
-    add(weights, {"componentType": 5126, "count": n_keys, "type": "SCALAR"})
-    binary = b"".join(chunks)
-    doc = {
-        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
-        "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.6, 0.5, 1]}}],
-        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0,
-                                    "targets": [{"POSITION": 2}]}], "weights": [0.0]}],
-        "animations": [{"samplers": [{"input": 3, "output": 4, "interpolation": "LINEAR"}],
-                        "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}]}],
-        "buffers": [{"byteLength": len(binary)}], "bufferViews": views, "accessors": accessors,
-    }
-    js = json.dumps(doc).encode()
-    js += b" " * (-len(js) % 4)
-    body = struct.pack("<II", len(js), 0x4E4F534A) + js + struct.pack("<II", len(binary), 0x004E4942) + binary
-    return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
+    frames = pos[None] + np.linspace(0, 1, n_keys, dtype=np.float32)[:, None, None] * delta[None]
+    return write_glb(FaceAnimation(frames, cube.faces, cube.part_ids, cube.parts, fps, "cube"))
 
 
 @pytest.fixture(scope="session")
