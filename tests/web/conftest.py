@@ -140,17 +140,19 @@ def wait_job(client, job_id: str, timeout: float = 120.0) -> dict:
 
 
 class LiveServer:
-    """A waitress server for an app in a background thread on 127.0.0.1 and a free port."""
+    """A threaded WSGI server for an app in a background thread on 127.0.0.1 and a free port."""
 
     def __init__(self, app) -> None:
-        from waitress.server import create_server
+        from werkzeug.serving import make_server
 
         self.app = app
-        self.server = create_server(app, host="127.0.0.1", port=free_port(), threads=8)
-        self.url = f"http://127.0.0.1:{self.server.effective_port}"
-        self.thread = threading.Thread(target=self.server.run, daemon=True)
+        self.server = make_server("127.0.0.1", free_port(), app, threaded=True)
+        self.url = f"http://127.0.0.1:{self.server.server_port}"
+        self.thread = threading.Thread(target=self.server.serve_forever, daemon=True)
         self.thread.start()
 
     def close(self) -> None:
-        self.server.close()
+        self.server.shutdown()  # stops serve_forever cleanly before the socket closes
+        self.server.server_close()
+        self.thread.join(timeout=10)
         self.app.extensions["facesvg_queue"].close()
