@@ -49,3 +49,30 @@ def test_sample_silhouette_matches_prerender(browser, sample_path, artifacts):
     a = chromium_frame(browser, result.data, picks[0] / anim.fps, cam.width, cam.height)
     b = chromium_frame(browser, result.data, picks[2] / anim.fps, cam.width, cam.height)
     assert np.abs(a.astype(int) - b.astype(int)).sum() > 0
+
+
+def test_gltfpack_sample_every_part_visible_and_moving(tmp_path):
+    """The gltfpack-style twin (quantized + meshopt, morph weights, head and eye rotations) converts fully."""
+    from converter.verify import evaluate, verify_animation
+
+    src = sample_path_gltfpack()
+    anim = formats.load(src)
+    result = convert(src, ConversionOptions(size=256))
+    ev = evaluate(result.data)
+    parts = anim.part_ids[ev.triangles]
+    for pid, part in enumerate(anim.parts):
+        mine = parts == pid
+        assert mine.any(), f"no triangle of part {part.name} in the SVG"
+        shown = ev.shown[:, mine]
+        assert shown.any(axis=1).all(), f"part {part.name} disappears in some frame"
+        # Moving: the drawn vertices of this part travel more than a pixel over the animation.
+        travel = np.abs(ev.xy[:, mine] - ev.xy[:1, mine]).max()
+        assert travel > 1.0, f"part {part.name} does not move ({travel:.3f} px)"
+    check = verify_animation(result.data, anim)
+    assert check.ok, check.summary()
+
+
+def sample_path_gltfpack():
+    from conftest import ROOT
+
+    return ROOT / "samples" / "face_gltfpack.glb"
