@@ -1,67 +1,87 @@
-"""Animated flat-shaded SVG: one <path> per kept triangle, back to front, SMIL-animated d, visibility and fill."""
+"""Animated flat-shaded SVG: one <path> per drawn triangle, back to front, SMIL-animated.
+
+Three encodings of the same document structure:
+
+- ``raw`` (options.raw): the chapter's unoptimised file, every frame's coordinates with 2 decimals, fill,
+  stroke and visibility as discrete animations where they change.
+- ``chapter``: the chapter's post-optimisations of the raw file: no coordinates while a triangle is hidden and
+  runs where a visible triangle does not move merged, placed with keyTimes (exact to 2 decimals); a path keeps
+  every frame where keyTimes would cost more (the chapter's own remark on long dynamic sequences).
+- ``bounded`` (default): per path only the keys needed so SMIL's linear interpolation stays within
+  options.tolerance px of the exact projection at every frame where the triangle is visible (converter.keyframes:
+  greedy keys with keyTimes, or evenly spaced keys without them where that is shorter); integer coordinates in a
+  viewBox scaled so rounding is part of the same budget; relative path syntax; static triangles without
+  <animate>; fill and stroke are currentColor, the colour keyed linearly within COLOR_TOLERANCE levels and its
+  first value a shared CSS class; visibility a discrete class animation; never-visible triangles dropped.
+
+Frame k shows at t = k / fps; dur = T / fps; linear animations end with a key at keyTime 1 (the loop end).
+"""
 
 from __future__ import annotations
 
 import json
+import math
 from xml.sax.saxutils import escape
 
 import numpy as np
 
+from converter import depth, keyframes
 from converter.options import ConversionOptions, Report
 from converter.sheet import Sheet
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+STROKE_PX = 0.5  # stroke of the fill colour hides anti-aliasing seams between neighbours
+COLOR_TOLERANCE = 3.0  # 8-bit levels per channel a shown colour may differ from the exact flat shade
+QUANT_SHARE = 0.25  # share of the tolerance spent on integer rounding (the rest on keyframes)
+TIME_SHARE = 0.03  # share of the tolerance spent on rounding keyTimes
+UNIFORM_ROUNDS = (1.0,)  # evenly spaced keys tried at these multiples of the greedy key count
+HIDDEN_CLASS = "h"
 
 
 def hex_colors(rgb: np.ndarray) -> np.ndarray:
     """Display-space 0..1 RGB (..., 3) to '#rrggbb' strings."""
-    q = np.clip(np.round(np.asarray(rgb) * 255), 0, 255).astype(np.int64)
-    code = (q[..., 0] << 16) | (q[..., 1] << 8) | q[..., 2]
+    return _hex(np.clip(np.round(np.asarray(rgb) * 255), 0, 255).astype(np.int64))
+
+
+def _hex(levels: np.ndarray) -> np.ndarray:
+    code = (levels[..., 0] << 16) | (levels[..., 1] << 8) | levels[..., 2]
     return np.char.add("#", np.char.zfill(np.char.lower(np.char.mod("%x", code)), 6))
-
-
-def key_times(frames: np.ndarray, n_frames: int) -> str:
-    """keyTimes for frame indices: frame k at k / T of the loop."""
-    return ";".join(_num(k / n_frames, 6) for k in frames)
 
 
 def _num(x: float, decimals: int) -> str:
     s = f"{x:.{decimals}f}".rstrip("0").rstrip(".")
+    if s.startswith("0."):
+        s = s[1:]
     return "0" if s in ("-0", "") else s
 
 
-def raw_path_values(tri_xy: np.ndarray, decimals: int = 2) -> list[str]:
-    """Per frame 'M x,y L x,y L x,y Z' of one triangle, (T, 3, 2) -> T strings (the chapter's encoding)."""
-    flat = np.round(tri_xy.reshape(tri_xy.shape[0], 6), decimals)
-    fmt = f"M%.{decimals}f,%.{decimals}fL%.{decimals}f,%.{decimals}fL%.{decimals}f,%.{decimals}fZ"
-    return [fmt % tuple(row) for row in flat]
+def viewbox_scale(tolerance: float) -> int:
+    """Viewport px -> integer viewBox units: rounding (at most step/sqrt 2 px) takes QUANT_SHARE of the bound."""
+    return max(1, math.ceil(1.0 / (math.sqrt(2) * QUANT_SHARE * tolerance)))
 
 
-def discrete_animation(attribute: str, values: list[str], n_frames: int, dur: str) -> str:
-    """A discrete <animate> that changes only where the value changes; '' when it never does."""
-    changes = [0] + [k for k in range(1, n_frames) if values[k] != values[k - 1]]
-    if len(changes) == 1:
-        return ""
-    return (
-        f'<animate attributeName="{attribute}" calcMode="discrete" dur="{dur}" repeatCount="indefinite" '
-        f'keyTimes="{key_times(np.array(changes), n_frames)}" values="{";".join(values[k] for k in changes)}"/>'
-    )
+def key_time_strings(n_frames: int, decimals: int, discrete: bool) -> list[str]:
+    """keyTimes text for frames 0..T: frame k at k/T; a discrete change half a frame early (k - 1/2)/T, so
+    frame k shows it however a player rounds its clock."""
+    q = 10**decimals
+    k = np.arange(n_frames + 1, dtype=np.float64)
+    if discrete:
+        k = np.maximum(k - 0.5, 0.0)
+    units = np.rint(k * q / n_frames).astype(np.int64)
+    return [_num(u / q, decimals) for u in units.tolist()]
 
 
-def path_animation(values: list[str], frames: np.ndarray, n_frames: int, dur: str) -> str:
-    """A linear <animate> of d through the given key frames; frame k shows at t = k / fps."""
-    frames = list(frames)
-    vals = [values[i] for i in range(len(frames))]
-    if frames[-1] != n_frames:  # SMIL's linear keyTimes must end at 1: hold the last key to the loop's end
-        frames.append(n_frames)
-        vals.append(vals[-1])
-    return (
-        f'<animate attributeName="d" dur="{dur}" repeatCount="indefinite" '
-        f'keyTimes="{key_times(np.array(frames), n_frames)}" values="{";".join(vals)}"/>'
-    )
+def key_time_decimals(n_frames: int, speed: np.ndarray, tolerance: float, budget: float) -> np.ndarray:
+    """Per path the fewest keyTimes decimals whose rounding moves a vertex at most budget px.
+
+    Rounding key times by delta shifts a linear segment's fraction by at most 2 delta T / (frames it spans),
+    so a vertex moves at most T (speed + tolerance) 10^-d px (speed: the path's fastest px per frame)."""
+    d = np.ceil(np.log10(np.maximum(n_frames * (np.asarray(speed) + tolerance) / budget, 1.0)))
+    return np.clip(d, 3, 12).astype(np.int64)
 
 
-def metadata(sheet: Sheet, options: ConversionOptions, report: Report, extra: dict | None = None) -> str:
+def metadata(sheet: Sheet, options: ConversionOptions, report: Report, extra: dict | None = None,
+             order: np.ndarray | None = None) -> str:
     """The <metadata id="facesvg"> element: JSON with everything needed to re-project and check the output."""
     doc = {
         "format": "facesvg",
@@ -75,7 +95,7 @@ def metadata(sheet: Sheet, options: ConversionOptions, report: Report, extra: di
         "source_frames": sheet.info.get("source_frames", [0, sheet.n_frames]),
         "options": options.to_json(),
         "counts": {k: v for k, v in sheet.info.items() if isinstance(v, int)},
-        "triangle_order": [int(i) for i in sheet.order],
+        "triangle_order": [int(i) for i in (sheet.order if order is None else order)],
     }
     if extra:
         doc.update(extra)
@@ -83,41 +103,330 @@ def metadata(sheet: Sheet, options: ConversionOptions, report: Report, extra: di
 
 
 def write(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
-    """The animated SVG, every frame encoded (the raw encoding) or the still of options.frame."""
-    t = sheet.n_frames
+    """The animated SVG (raw when options.raw, else error-bounded), or the still of options.frame."""
+    if options.frame is not None:
+        return write_still(sheet, options, report, options.frame)
+    return encode(sheet, options, report, "raw" if options.raw else "bounded")
+
+
+def path_ids(tris: np.ndarray) -> list[str]:
+    """Unique element ids: f<triangle>, and f<triangle>b for a triangle's layer copy."""
+    seen: set[int] = set()
+    out = []
+    for t in tris.tolist():
+        out.append(f"f{t}b" if t in seen else f"f{t}")
+        seen.add(t)
+    return out
+
+
+def _header(sheet: Sheet, scale: int) -> str:
     w, h = sheet.camera.width, sheet.camera.height
-    dur = f"{_num(sheet.duration, 6)}s"
-    colors = hex_colors(sheet.face_rgb)  # (T, F)
-    frame_range = [options.frame] if options.frame is not None else None
-    out = [
-        f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w} {h}" width="{w}" height="{h}">',
-        metadata(sheet, options, report),
-        f"<title>{escape(sheet.name)}</title>",
-        '<g stroke-linejoin="round">',
-    ]
-    for f in sheet.order:
-        tri = sheet.xy[:, sheet.faces[f]]
-        if frame_range is not None:
-            k = frame_range[0]
-            if not sheet.visible[k, f]:
-                continue
-            d = raw_path_values(tri[k : k + 1])[0]
-            out.append(f'<path id="f{f}" d="{d}" fill="{colors[k, f]}" stroke="{colors[k, f]}" stroke-width="0.5"/>')
-            continue
-        vis = ["visible" if v else "hidden" for v in sheet.visible[:, f]]
-        values = raw_path_values(tri)
-        fills = list(colors[:, f])
-        first = int(np.argmax(sheet.visible[:, f]))
-        anims = [
-            path_animation(values, np.arange(t), t, dur) if t > 1 else "",
-            discrete_animation("visibility", vis, t, dur),
-            discrete_animation("fill", fills, t, dur),
-            discrete_animation("stroke", fills, t, dur),
-        ]
-        body = "".join(anims)
-        attrs = f'id="f{f}" d="{values[first]}" fill="{fills[0]}" stroke="{fills[0]}" stroke-width="0.5"'
-        if not sheet.visible[0, f]:
-            attrs += ' visibility="hidden"'
-        out.append(f"<path {attrs}>{body}</path>" if body else f"<path {attrs}/>")
+    return f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w * scale} {h * scale}" width="{w}" height="{h}">'
+
+
+def _style(palette: np.ndarray, scale: int) -> str:
+    rules = "".join(f".c{i}{{color:{c}}}" for i, c in enumerate(_hex(palette).tolist()))
+    sw = _num(STROKE_PX * scale, 3)
+    return (f"<style>path{{fill:currentColor;stroke:currentColor;stroke-width:{sw};stroke-linejoin:round}}"
+            f".{HIDDEN_CLASS}{{visibility:hidden}}{rules}</style>")
+
+
+def write_still(sheet: Sheet, options: ConversionOptions, report: Report, frame: int) -> bytes:
+    """One frame as static paths (exact colours, coordinates rounded to the tolerance's grid)."""
+    from converter.errors import InputError
+
+    if not 0 <= frame < sheet.n_frames:
+        raise InputError(f"frame {frame} is outside 0..{sheet.n_frames - 1}; choose one inside.")
+    scale = viewbox_scale(options.tolerance)
+    tris = sheet.order[sheet.visible[frame, sheet.order]]
+    levels = np.clip(np.rint(sheet.face_rgb[frame, tris] * 255), 0, 255).astype(np.int64)
+    palette, cls = np.unique(levels, axis=0, return_inverse=True)
+    q = np.rint(sheet.xy[frame][sheet.faces[tris]].reshape(-1, 6).astype(np.float64) * scale).astype(np.int64)
+    d = _path_strings(q)
+    out = [_header(sheet, scale), metadata(sheet, options, report, {"encoding": {"mode": "still", "scale": scale,
+                                                                           "frame": frame}}, order=tris),
+           f"<title>{escape(sheet.name)}</title>", _style(palette, scale), "<g>"]
+    out += [f'<path id="f{t}" class="c{c}" d="{s}"/>' for t, c, s in zip(tris.tolist(), cls.reshape(-1).tolist(), d)]
     out.append("</g></svg>\n")
     return "\n".join(out).encode("utf-8")
+
+
+def _path_strings(q: np.ndarray) -> list[str]:
+    """Shortest relative syntax 'M x y l dx dy dx dy z' for integer triangles (N, 6)."""
+    r = q.copy()
+    r[:, 2:4] = q[:, 2:4] - q[:, 0:2]
+    r[:, 4:6] = q[:, 4:6] - q[:, 2:4]
+    if not len(r):
+        return []
+    # One format call for every row; a minus sign doubles as the separator, so " -" becomes "-".
+    text = (("M%d %dl%d %d %d %dz\x00" * len(r)) % tuple(r.ravel().tolist()))[:-1]
+    return text.replace(" -", "-").split("\x00")
+
+
+def _raw_strings(tri_xy: np.ndarray) -> list[str]:
+    """The chapter's 'M x,y L x,y L x,y Z' with 2 decimals, (N, 6) px -> N strings."""
+    c = np.rint(tri_xy.astype(np.float64) * 100).astype(np.int64)
+    sign = np.where(c < 0, "-", "")
+    a = np.abs(c)
+    whole = np.char.add(sign, (a // 100).astype(str))
+    parts = np.char.add(whole, np.char.add(".", np.char.zfill((a % 100).astype(str), 2)))
+    return [f"M{r[0]},{r[1]}L{r[2]},{r[3]}L{r[4]},{r[5]}Z" for r in parts.tolist()]
+
+
+def color_keys(rgb: np.ndarray, active: np.ndarray, tolerance: float) -> keyframes.Keys:
+    """Colour (T, P, 3) in 0..1 as linear keys within tolerance 8-bit levels per channel where shown (values
+    rounded to integer levels, which the tolerance includes)."""
+    levels = np.asarray(rgb, np.float64) * 255
+    keys = keyframes.reduce(levels, active, max(tolerance - 0.6, 1e-6))  # rounding 0.5, keyTimes 0.1
+    q = np.clip(np.rint(keys.values), 0, 255)
+    return keys._replace(values=q)
+
+
+def _discrete(attribute: str, codes: np.ndarray, names: list[str], kt: list[str], dur: str) -> list[str]:
+    """Per path a discrete <animate> of codes (T, P) at their change points ('' when constant)."""
+    t, p = codes.shape
+    change = np.zeros((t, p), bool)
+    change[1:] = codes[1:] != codes[:-1]
+    moving = change.any(axis=0)
+    out = [""] * p
+    cols, rows = np.nonzero(change.T)  # sorted by path, then frame
+    bounds = np.searchsorted(cols, np.arange(p + 1))
+    for j in np.flatnonzero(moving).tolist():
+        frames = [0] + rows[bounds[j]:bounds[j + 1]].tolist()
+        out[j] = (f'<animate attributeName="{attribute}" calcMode="discrete" dur="{dur}" repeatCount="indefinite" '
+                  f'keyTimes="{";".join(kt[k] for k in frames)}" '
+                  f'values="{";".join(names[codes[k, j]] for k in frames)}"/>')
+    return out
+
+
+def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str = "bounded") -> bytes:
+    """The animated SVG in one of the encodings: 'raw', 'chapter' or 'bounded' (module docstring)."""
+    t = sheet.n_frames
+    dl = depth.draw_list(sheet, layers=options.depth_layers)
+    tris, active = dl.triangles, dl.active
+    shown = active.any(axis=0)  # a path never shown is dropped
+    tris, active = tris[shown], active[:, shown]
+    p = len(tris)
+    dur = f"{sheet.duration:.6f}".rstrip("0").rstrip(".") + "s"  # SMIL clock values need the leading digit
+    track = sheet.xy[:, sheet.faces[tris]].reshape(t, p, 6).astype(np.float64)
+    extra: dict = {"encoding": {"mode": mode}}
+    if mode in ("raw", "chapter"):
+        body = _encode_raw(sheet, tris, active, track, dur, chapter=mode == "chapter")
+        scale = 1
+    else:
+        body, scale, enc = _encode_keyed(sheet, options, tris, active, track, dur, report)
+        extra["encoding"].update(enc)
+    head = [_header(sheet, scale), metadata(sheet, options, report, extra, order=tris),
+            f"<title>{escape(sheet.name)}</title>"]
+    report.counts["paths"] = p
+    if mode == "bounded":
+        # The raw file's d values alone, counted exactly (writing them would cost more than this conversion).
+        report.sizes["raw_d_values"] = raw_values_bytes(track)
+    report.counts["depth_conflicts"] = dl.conflicts
+    report.counts["depth_conflicts_left"] = dl.residual
+    report.counts["layer_copies"] = int(len(tris) - len(np.unique(tris)))
+    return ("\n".join(head + body) + "\n</g></svg>\n").encode("utf-8")
+
+
+def raw_values_bytes(track: np.ndarray) -> int:
+    """Exact bytes of the raw encoding's d values for tracks (T, P, 6) px: every frame plus the held last,
+    'M x,y L x,y L x,y Z' with 2 decimals, ';' between (the bulk of a raw file; counted, not written)."""
+    c = np.rint(track * 100).astype(np.int64)
+    a = np.abs(c) // 100
+    digits = 1 + np.searchsorted(10 ** np.arange(1, 19, dtype=np.int64), a, side="right")
+    per_value = (digits + 3 + (c < 0)).sum(axis=2) + 7 + 1  # numbers, M L L Z and 3 commas, ';'
+    t, p = track.shape[:2]
+    return int(per_value.sum() + per_value[-1].sum() - p)
+
+
+def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.ndarray, dur: str,
+                chapter: bool = False) -> list[str]:
+    """The raw file: every frame's coordinates (2 decimals) as evenly spaced values (frame k at k/T, the last
+    held to T); fill, stroke and visibility as discrete animations where they change. With chapter=True the
+    chapter's post-optimisations: coordinates only at frames that need them (nothing while hidden, a still
+    run reduced to its two ends) placed with keyTimes, exact to 2 decimals."""
+    t, p = active.shape
+    colors = hex_colors(sheet.face_rgb[:, tris]).tolist()  # (T, P)
+    kt = key_time_strings(t, 6, discrete=True)
+    vis = _discrete("visibility", active.astype(np.int64), ["hidden", "visible"], kt, dur)
+    names_arr, fill_codes = np.unique(np.asarray(colors), return_inverse=True)
+    fills = _discrete("fill", fill_codes.reshape(t, p), names_arr.tolist(), kt, dur)
+    strokes = [a.replace('"fill"', '"stroke"', 1) for a in fills]
+    raw = _raw_strings(track.reshape(-1, 6))
+    if chapter:
+        keys = keyframes.reduce(np.rint(track * 100), active, 1e-6)  # exact in hundredths of a pixel
+        pk, fk = np.nonzero(keys.mask.T)
+        text = _raw_strings(keys.values.transpose(1, 0, 2)[pk, fk] / 100.0)
+        bounds = np.searchsorted(pk, np.arange(p + 1)).tolist()
+        moving = _varying(keys.mask, keys.values.transpose(1, 0, 2)[pk, fk])
+        kt_lin = key_time_strings(t, 6, discrete=False)
+        fkl = fk.tolist()
+    out = ['<g stroke-width="0.5" stroke-linejoin="round">']
+    ids = path_ids(tris)
+    for j in range(p):
+        if chapter and (not moving[j] or (bounds[j + 1] - bounds[j]) * 1.4 < t + 1):
+            # keyTimes pay when many frames are still or hidden; on a moving triangle every frame is cheaper.
+            a, b = bounds[j], bounds[j + 1]
+            first = text[a]
+            anim = (f'<animate attributeName="d" dur="{dur}" repeatCount="indefinite" keyTimes="'
+                    f'{";".join([kt_lin[k] for k in fkl[a:b]])}" values="{";".join(text[a:b])}"/>') if moving[j] else ""
+        else:
+            vals = raw[j::p]
+            vals = vals + [vals[-1]]
+            first = vals[int(np.argmax(active[:, j]))]
+            anim = (f'<animate attributeName="d" dur="{dur}" repeatCount="indefinite" values="{";".join(vals)}"/>'
+                    if t > 1 else "")
+        attrs = f'id="{ids[j]}" d="{first}" fill="{colors[0][j]}" stroke="{colors[0][j]}"'
+        if not active[0, j]:
+            attrs += ' visibility="hidden"'
+        out.append(f"<path {attrs}>{anim}{vis[j]}{fills[j]}{strokes[j]}</path>")
+    return out
+
+
+def _linear(attribute: str, mask: np.ndarray, text: list[str], kt_of: list[list[str]], dur: str,
+            animate: np.ndarray) -> tuple[list[str], list[str], int]:
+    """Per path a linear <animate> through its keys (mask (T+1, P), texts path-major) where animate[j].
+
+    Returns the animations, each path's first key text and the number of keys written."""
+    t1, p = mask.shape
+    pk, fk = np.nonzero(mask.T)
+    bounds = np.searchsorted(pk, np.arange(p + 1)).tolist()
+    fkl = fk.tolist()
+    out, first, n = [""] * p, [""] * p, 0
+    for j in range(p):
+        a, b = bounds[j], bounds[j + 1]
+        if a == b:
+            continue
+        first[j] = text[a]
+        if not animate[j]:
+            n += 1
+            continue
+        kt = kt_of[j]
+        out[j] = (f'<animate attributeName="{attribute}" dur="{dur}" repeatCount="indefinite" '
+                  f'keyTimes="{";".join([kt[k] for k in fkl[a:b]])}" values="{";".join(text[a:b])}"/>')
+        n += b - a
+    return out, first, n
+
+
+def _varying(mask: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """Bool (P,): the key rows (path-major, (K, D)) of a path are not all equal."""
+    p = mask.shape[1]
+    pk = np.nonzero(mask.T)[0]
+    bounds = np.searchsorted(pk, np.arange(p + 1))
+    counts = np.diff(bounds)
+    out = np.zeros(p, bool)
+    has = counts > 0
+    if not len(rows):
+        return out
+    firsts = rows[np.repeat(bounds[:-1][has], counts[has])]
+    diff = (rows != firsts).any(axis=1)
+    out[has] = np.logical_or.reduceat(diff, bounds[:-1][has])
+    return out
+
+
+def _uniform_instead(track: np.ndarray, active: np.ndarray, mask: np.ndarray, text: list[str],
+                     decimals: np.ndarray, moving: np.ndarray, scale: int, radius: float, dur: str,
+                     d_anims: list[str]) -> int:
+    """Replace a path's keyed d animation by evenly spaced keys (no keyTimes) where that is shorter.
+
+    Evenly spaced values are least-squares fitted and checked exactly (rounding included) against the full
+    Euclidean bound, so they often need no more keys than the greedy pass and save the keyTimes text.
+    d_anims is updated in place; returns how many paths changed."""
+    t, p = active.shape
+    counts = mask.sum(axis=0)
+    lengths = np.array([len(x) for x in text], np.float64)
+    pk = np.nonzero(mask.T)[0]
+    per_key = np.bincount(pk, weights=lengths + 1, minlength=p) / np.maximum(counts, 1)
+    keyed_cost = counts * (per_key + decimals + 2)
+    ladder = np.unique(np.round(np.geomspace(2, t + 1, 48)).astype(np.int64))
+    chosen = np.zeros(p, np.int64)
+    values: dict[int, np.ndarray] = {}
+    for factor in UNIFORM_ROUNDS:
+        todo = np.flatnonzero(moving & (chosen == 0) & (counts >= 3))
+        want = np.ceil(counts[todo] * factor).astype(np.int64)
+        cand = ladder[np.minimum(np.searchsorted(ladder, want), len(ladder) - 1)]
+        worth = cand * per_key[todo] < keyed_cost[todo]
+        todo, cand = todo[worth], cand[worth]
+        for n in np.unique(cand).tolist():
+            idx = todo[cand == n]
+            q, ok = keyframes.uniform_fit(track[:, idx], active[:, idx], n, scale, radius)
+            for j, col in zip(idx[ok].tolist(), np.flatnonzero(ok).tolist()):
+                chosen[j] = n
+                values[j] = q[:, col]
+    if not values:
+        return 0
+    order = sorted(values)
+    strings = _path_strings(np.concatenate([values[j] for j in order]))
+    pos = 0
+    for j in order:
+        n = len(values[j])
+        d_anims[j] = (f'<animate attributeName="d" dur="{dur}" repeatCount="indefinite" '
+                      f'values="{";".join(strings[pos:pos + n])}"/>')
+        pos += n
+    return len(order)
+
+
+def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, active: np.ndarray,
+                  track: np.ndarray, dur: str, report: Report) -> tuple[list[str], int, dict]:
+    """The error-bounded integer encoding (module docstring)."""
+    t, p = active.shape
+    tol = options.tolerance
+    view_scale = viewbox_scale(tol)
+    time_budget = TIME_SHARE * tol
+    float_err = 1e-4 + 2e-7 * max(sheet.camera.width, sheet.camera.height)
+    radius = tol - math.sqrt(0.5) / view_scale - time_budget - float_err  # Euclidean px left for keyframing
+    keys = keyframes.reduce(keyframes.octagon_tracks(track), active, radius * keyframes.OCTAGON, bend=True)
+    q = np.rint(keys.values[..., :6] * view_scale).astype(np.int64)
+    if t > 1:
+        step = np.linalg.norm(np.diff(track.reshape(t, p, 3, 2), axis=0), axis=-1).max(axis=(0, 2))
+    else:
+        step = np.zeros(p)
+    decimals = key_time_decimals(t, step, tol, time_budget)
+    color_tol = COLOR_TOLERANCE
+    enc = {"scale": view_scale, "tolerance": tol, "fit_px": round(radius, 6), "color_levels": color_tol,
+           "keytime_decimals": [int(decimals.min()), int(decimals.max())] if p else []}
+    tables = {dj: key_time_strings(t, dj, discrete=False) for dj in set(decimals.tolist()) | {6}}
+    kt_of = [tables[dj] for dj in decimals.tolist()]
+    # Geometry.
+    pk, fk = np.nonzero(keys.mask.T)
+    rows = q.transpose(1, 0, 2)[pk, fk]
+    text = _path_strings(rows)
+    moving = _varying(keys.mask, rows)
+    d_anims, d_first, n_keys = _linear("d", keys.mask, text, kt_of, dur, moving)
+    n_uniform = _uniform_instead(track, active, keys.mask, text, decimals, moving, view_scale,
+                                 tol - float_err, dur, d_anims)
+    # Colour: linear keys within the colour tolerance; the first key's colour is the path's class.
+    ckeys = color_keys(sheet.face_rgb[:, tris], active, color_tol)
+    cpk, cfk = np.nonzero(ckeys.mask.T)
+    crow = ckeys.values.transpose(1, 0, 2)[cpk, cfk].astype(np.int64)
+    c_vary = _varying(ckeys.mask, crow)
+    c_dec = min(6, int(math.ceil(math.log10(max(t, 2)))) + 2)  # a colour lags at most 255 T 10^-d / 2 levels
+    c_table = tables.get(c_dec) or key_time_strings(t, c_dec, discrete=False)
+    c_anims, _, n_color_keys = _linear("color", ckeys.mask, _hex(crow).tolist(), [c_table] * p, dur, c_vary)
+    cbounds = np.searchsorted(cpk, np.arange(p + 1))[:-1]
+    packed = (crow[:, 0] << 16) | (crow[:, 1] << 8) | crow[:, 2]
+    base = packed[np.minimum(cbounds, max(len(packed) - 1, 0))] if len(packed) else np.zeros(p, np.int64)
+    values, counts = np.unique(base, return_counts=True)
+    rank = np.lexsort((values, -counts))  # the most used colour gets the shortest class name
+    remap = np.empty(len(values), np.int64)
+    remap[rank] = np.arange(len(values))
+    cls = remap[np.searchsorted(values, base)]
+    pal = values[rank]
+    palette = np.stack([(pal >> 16) & 255, (pal >> 8) & 255, pal & 255], axis=1)
+    names = [f"c{i}" for i in range(len(palette))] + [HIDDEN_CLASS]  # code -1 -> hidden
+    codes = np.where(active, cls[None, :], -1)
+    disc_decimals = int(math.ceil(math.log10(4 * t))) if t > 1 else 1
+    v_anims = _discrete("class", codes, names, key_time_strings(t, disc_decimals, discrete=True), dur)
+    out = [_style(palette, view_scale), "<g>"]
+    ids = path_ids(tris)
+    for j in range(p):
+        body = d_anims[j] + c_anims[j] + v_anims[j]
+        el = f'<path id="{ids[j]}" class="{names[codes[0, j]]}" d="{d_first[j]}"'
+        out.append(f"{el}>{body}</path>" if body else f"{el}/>")
+    report.counts["keys"] = n_keys
+    report.counts["uniform_paths"] = n_uniform
+    report.counts["color_keys"] = n_color_keys
+    report.counts["static_paths"] = int((~moving).sum())
+    report.counts["palette"] = len(palette)
+    report.figures["keys_per_path"] = n_keys / max(p, 1)
+    return out, view_scale, enc

@@ -1,0 +1,275 @@
+"""Drawing order when depth order changes during the animation (head turns, jaw opening in front of teeth).
+
+An SVG draws its paths in one fixed order (painter's algorithm), but which of two overlapping triangles is in
+front can change from frame to frame. What we do and what we measured (bench/bench_svg.py, "depth order"):
+
+1. Back-face and frustum culling per frame (converter.extract) removes most overlaps: on a face, two
+   front-facing triangles overlap only across a fold (nose over cheek when the head turns, lips over teeth,
+   eyelids over the eyeballs). Culled triangles are hidden by the class animation at exactly those frames.
+2. The fixed order is the painter's order of the neutral frame (centroid NDC depth, back to front).
+   ``robust_order`` (mean depth over the frames where each triangle is visible) is the alternative we measured.
+3. ``layered`` (experimental, not the default): find pairs of triangles whose interiors overlap at some frame
+   (grid binning of screen boxes at sampled frames, separating-axis test, pairs sharing a vertex skipped),
+   decide which is nearer where they overlap (both depth planes compared at probe points inside both), and give
+   a triangle that must cover a later-drawn one a second path drawn after it, shown only at those frames while
+   the original is hidden there (animated visibility).
+
+The error left is measured against a z-buffer with ``order_error``: pyrender renders triangle ids, resvg
+renders the same frame's SVG with ids as colours, and we count covered interior pixels (away from
+anti-aliased edges) whose front triangle differs. On the ICT faces (head turns up to +-40 degrees) the fixed
+neutral-frame order leaves under 0.3% of such pixels wrong, as a per-frame painter's sort would; the
+experimental layer copies fix a triangle crossing in front of another (tests) but made the faces worse, so
+the default is the fixed order; see BENCHMARKS.md for the figures.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from converter.sheet import Sheet
+
+OVERLAP_MARGIN_PX = 0.25  # interiors must overlap by this much along every axis (neighbours only touch)
+SAMPLE_FRAMES = 16  # overlapping pairs are searched at about this many frames
+CHUNK = 4000  # pairs tested together
+
+
+class DrawList(NamedTuple):
+    """Paths in document (painter's) order: the triangle each draws and the frames where it shows."""
+
+    triangles: np.ndarray  # int32 (P,) triangle id per path, back to front; a triangle may appear twice
+    active: np.ndarray  # bool (T, P) the path is shown at frame k
+    conflicts: int = 0  # (pair, frame) conflicts of the base order
+    residual: int = 0  # (pair, frame) conflicts left after the layer copies
+
+
+def robust_order(sheet: Sheet, tris: np.ndarray) -> np.ndarray:
+    """tris sorted back to front by mean centroid depth over the frames where each is visible (stable)."""
+    cen = sheet.depth[:, sheet.faces[tris]].mean(axis=2)  # (T, K)
+    vis = sheet.visible[:, tris]
+    mean = np.where(vis, cen, 0).sum(axis=0) / np.maximum(vis.sum(axis=0), 1)
+    return tris[np.argsort(-mean, kind="stable")].astype(np.int32)
+
+
+def _grid_pairs(lo: np.ndarray, hi: np.ndarray, cell: float) -> np.ndarray:
+    """(M, 2) index pairs whose boxes [lo, hi] (N, 2) share a grid cell (each pair once, i < j)."""
+    c0 = np.floor(lo / cell).astype(np.int64)
+    c1 = np.floor(hi / cell).astype(np.int64)
+    span = c1 - c0 + 1
+    n_cells = span[:, 0] * span[:, 1]
+    owner = np.repeat(np.arange(len(lo)), n_cells)
+    local = np.arange(n_cells.sum()) - np.repeat(np.cumsum(n_cells) - n_cells, n_cells)
+    sx = np.repeat(span[:, 0], n_cells)
+    cx = np.repeat(c0[:, 0], n_cells) + local % sx
+    cy = np.repeat(c0[:, 1], n_cells) + local // sx
+    key = (cx - cx.min()) * (cy.max() - cy.min() + 1) + (cy - cy.min())
+    order = np.lexsort((owner, key))
+    key, owner = key[order], owner[order]
+    out = []
+    for d in range(1, len(key)):
+        same = key[d:] == key[:-d]
+        if not same.any():
+            break
+        out.append(np.stack([owner[:-d][same], owner[d:][same]], axis=1))
+    if not out:
+        return np.zeros((0, 2), np.int64)
+    return np.concatenate(out)
+
+
+def overlapping_pairs(sheet: Sheet, tris: np.ndarray, frames: np.ndarray,
+                      active: np.ndarray | None = None) -> np.ndarray:
+    """(M, 2) positions into tris (first < second) of paths whose interiors overlap at one of the frames
+    (both shown there); pairs sharing a vertex are left out."""
+    corners = sheet.xy[:, sheet.faces[tris]]
+    shown = sheet.visible[:, tris] if active is None else active
+    f = sheet.faces[tris]
+    found = []
+    for k in frames.tolist():
+        idx = np.flatnonzero(shown[k])
+        if len(idx) < 2:
+            continue
+        c = corners[k, idx].astype(np.float64)
+        lo, hi = c.min(axis=1), c.max(axis=1)
+        size = float(np.median((hi - lo).max(axis=-1)))
+        pairs = _grid_pairs(lo, hi, max(2 * size, 1.0))
+        gap = np.minimum(hi[pairs[:, 0]], hi[pairs[:, 1]]) - np.maximum(lo[pairs[:, 0]], lo[pairs[:, 1]])
+        pairs = pairs[(gap > OVERLAP_MARGIN_PX).all(axis=1)]
+        pairs = pairs[_overlap(c[pairs[:, 0]], c[pairs[:, 1]], OVERLAP_MARGIN_PX)]
+        found.append(idx[pairs])
+    if not found:
+        return np.zeros((0, 2), np.int64)
+    pairs = np.unique(np.sort(np.concatenate(found), axis=1), axis=0)
+    shared = (f[pairs[:, 0], :, None] == f[pairs[:, 1], None, :]).any(axis=(1, 2))
+    return pairs[~shared]
+
+
+def sample_frames(n_frames: int) -> np.ndarray:
+    """About SAMPLE_FRAMES evenly spread frames (all of them for short animations)."""
+    return np.unique(np.linspace(0, n_frames - 1, min(n_frames, SAMPLE_FRAMES)).round().astype(np.int64))
+
+
+def _overlap(a: np.ndarray, b: np.ndarray, margin: float) -> np.ndarray:
+    """Separating-axis test of triangles a, b (..., 3, 2): True where their interiors overlap by > margin."""
+    out = np.ones(a.shape[:-2], bool)
+    for tri in (a, b):
+        for e in range(3):
+            edge = tri[..., (e + 1) % 3, :] - tri[..., e, :]
+            axis = np.stack([-edge[..., 1], edge[..., 0]], axis=-1)
+            axis /= np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), 1e-12)
+            pa = np.einsum("...vc,...c->...v", a, axis)
+            pb = np.einsum("...vc,...c->...v", b, axis)
+            gap = np.minimum(pa.max(-1), pb.max(-1)) - np.maximum(pa.min(-1), pb.min(-1))
+            out &= gap > margin
+    return out
+
+
+def _bary(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Barycentric coordinates (..., 3) of points p (..., 2) in triangles tri (..., 3, 2)."""
+    a, b, c = tri[..., 0, :], tri[..., 1, :], tri[..., 2, :]
+    v0, v1, v2 = b - a, c - a, p - a
+    den = v0[..., 0] * v1[..., 1] - v1[..., 0] * v0[..., 1]
+    den = np.where(np.abs(den) > 1e-12, den, 1e-12)
+    u = (v2[..., 0] * v1[..., 1] - v1[..., 0] * v2[..., 1]) / den
+    v = (v0[..., 0] * v2[..., 1] - v2[..., 0] * v0[..., 1]) / den
+    return np.stack([1 - u - v, u, v], axis=-1)
+
+
+def _nearer(a: np.ndarray, za: np.ndarray, b: np.ndarray, zb: np.ndarray) -> np.ndarray:
+    """Whether triangle a is nearer than b where they overlap: both depth planes compared at the probe points
+    (vertices, centroids, centroid midpoint) that lie inside both, else at the centroid midpoint."""
+    probes = np.concatenate([a, b, a.mean(axis=-2, keepdims=True), b.mean(axis=-2, keepdims=True),
+                             ((a.mean(axis=-2) + b.mean(axis=-2)) / 2)[..., None, :]], axis=-2)  # (..., 9, 2)
+    ba = _bary(a[..., None, :, :], probes)
+    bb = _bary(b[..., None, :, :], probes)
+    inside = (ba > -1e-6).all(-1) & (bb > -1e-6).all(-1)
+    diff = (ba * za[..., None, :]).sum(-1) - (bb * zb[..., None, :]).sum(-1)  # (..., 9)
+    mean_inside = np.where(inside, diff, 0).sum(-1) / np.maximum(inside.sum(-1), 1)
+    return np.where(inside.any(-1), mean_inside, diff[..., -1]) < 0
+
+
+def front_of(sheet: Sheet, tris: np.ndarray, pairs: np.ndarray, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For pairs (M, 2) at frames (S,): interiors overlap with both visible (S, M), and first is nearer (S, M)."""
+    fr = np.asarray(frames)
+    xy = sheet.xy[fr][:, sheet.faces[tris]]
+    z = sheet.depth[fr][:, sheet.faces[tris]]
+    vis = sheet.visible[fr][:, tris]
+    m = len(pairs)
+    overlap = np.zeros((len(fr), m), bool)
+    first_nearer = np.zeros((len(fr), m), bool)
+    for s in range(0, m, CHUNK):  # chunks bound memory
+        pa, pb = pairs[s:s + CHUNK, 0], pairs[s:s + CHUNK, 1]
+        a, b = xy[:, pa].astype(np.float64), xy[:, pb].astype(np.float64)
+        overlap[:, s:s + CHUNK] = vis[:, pa] & vis[:, pb] & _overlap(a, b, OVERLAP_MARGIN_PX)
+        first_nearer[:, s:s + CHUNK] = _nearer(a, z[:, pa].astype(np.float64), b, z[:, pb].astype(np.float64))
+    return overlap, first_nearer
+
+
+def draw_list(sheet: Sheet, layers: bool = True) -> DrawList:
+    """Paths back to front: the sheet's painter's order (neutral frame), each shown where visible.
+
+    layers is accepted for the option of that name; the layer copies (``layered``) stay experimental until
+    they measure better than the fixed order (module docstring)."""
+    tris = np.asarray(sheet.order, np.int32)
+    return DrawList(tris, sheet.visible[:, tris])
+
+
+def layered(sheet: Sheet) -> DrawList:
+    """Experimental: the fixed order plus layer copies of triangles that must cover later-drawn ones."""
+    tris = np.asarray(sheet.order, np.int32)
+    active = sheet.visible[:, tris]
+    if len(tris) < 2:
+        return DrawList(tris, active)
+    samples = sample_frames(sheet.n_frames)
+    pairs = overlapping_pairs(sheet, tris, samples)
+    if not len(pairs):
+        return DrawList(tris, active)
+    overlap, first_nearer = front_of(sheet, tris, pairs, samples)
+    # Positions: pairs[:, 0] is drawn first, so a conflict is "the first is nearer" where they overlap.
+    # Pairs whose order flips between samples are checked at every frame.
+    suspect = (overlap & first_nearer).any(axis=0) | (first_nearer.any(axis=0) & ~first_nearer.all(axis=0))
+    pairs = pairs[suspect]
+    overlap, first_nearer = front_of(sheet, tris, pairs, np.arange(sheet.n_frames))
+    conflict = overlap & first_nearer
+    n_conflicts = int(conflict.sum())
+    has = conflict.any(axis=0)
+    if not n_conflicts:
+        return DrawList(tris, active)
+    lo, hi = pairs[has, 0], pairs[has, 1]
+    conflict = conflict[:, has]
+    # Each triangle that must cover a later one: one copy after the last such triangle, shown at those frames.
+    movers = np.unique(lo)
+    after = np.full(len(tris), -1)
+    np.maximum.at(after, lo, hi)
+    up = np.zeros((sheet.n_frames, len(tris)), bool)
+    for j in range(len(lo)):
+        up[:, lo[j]] |= conflict[:, j]
+    keys = np.concatenate([np.arange(len(tris), dtype=np.float64), after[movers] + 0.5])
+    all_tris = np.concatenate([tris, tris[movers]])
+    all_active = np.concatenate([active & ~up, (active & up)[:, movers]], axis=1)
+    order = np.lexsort((np.arange(len(keys)), keys))
+    out = DrawList(all_tris[order].astype(np.int32), all_active[:, order], n_conflicts, 0)
+    return out._replace(residual=residual_conflicts(sheet, out, samples))
+
+
+def residual_conflicts(sheet: Sheet, dl: DrawList, frames: np.ndarray | None = None) -> int:
+    """(pair, frame) conflicts of a draw list at frames (default: all): overlapping shown paths where the
+    earlier-drawn one is nearer."""
+    frames = np.arange(sheet.n_frames) if frames is None else frames
+    pairs = overlapping_pairs(sheet, dl.triangles, frames, dl.active)
+    pairs = pairs[dl.triangles[pairs[:, 0]] != dl.triangles[pairs[:, 1]]]
+    if not len(pairs):
+        return 0
+    overlap, first_nearer = front_of(sheet, dl.triangles, pairs, frames)
+    both = dl.active[frames][:, pairs[:, 0]] & dl.active[frames][:, pairs[:, 1]]
+    return int((overlap & first_nearer & both).sum())
+
+
+def id_svg(sheet: Sheet, dl: DrawList, frame: int) -> str:
+    """A still SVG of one frame with every path filled by its triangle id + 1 as a colour, no anti-aliasing."""
+    show = dl.active[frame]
+    tris = dl.triangles[show]
+    ids = tris.astype(np.int64) + 1
+    xy = sheet.xy[frame][sheet.faces[tris]].reshape(-1, 6)
+    body = "".join(
+        f'<path d="M{r[0]:.3f} {r[1]:.3f}L{r[2]:.3f} {r[3]:.3f}L{r[4]:.3f} {r[5]:.3f}Z" fill="#{c:06x}"/>'
+        for r, c in zip(xy.tolist(), ((ids & 255) << 16 | ((ids >> 8) & 255) << 8 | (ids >> 16) & 255).tolist()))
+    w, h = sheet.camera.width, sheet.camera.height
+    return (f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" '
+            f'shape-rendering="crispEdges">{body}</svg>')
+
+
+def order_error(frames3d: np.ndarray, sheet: Sheet, dl: DrawList, which: list[int]) -> dict[str, float]:
+    """Share of the interior pixels (the z-buffer shows one triangle in their 3x3 neighbourhood) covered in both
+    renders whose front triangle in the painter's SVG (resvg, ids as colours) is not the z-buffer's (pyrender);
+    per-frame max and mean over the frames `which`."""
+    import io
+
+    import resvg_py
+    from PIL import Image
+
+    from converter import render
+
+    pyrender = render._pyrender()
+    f = sheet.faces.shape[0]
+    ids = np.arange(1, f + 1, dtype=np.int64)
+    rgba = np.stack([ids & 255, (ids >> 8) & 255, (ids >> 16) & 255, np.full(f, 255)], axis=1).astype(np.uint8)
+    fracs = []
+    with render.offscreen(sheet.camera.width, sheet.camera.height) as r:
+        for k in which:
+            scene = render._scene(sheet.camera)
+            scene.add(render._mesh(frames3d[k], sheet.faces, rgba, smooth=False))
+            color, _ = r.render(scene, flags=pyrender.RenderFlags.FLAT)
+            px = color.astype(np.int64)
+            ref = px[..., 0] | (px[..., 1] << 8) | (px[..., 2] << 16)
+            png = bytes(resvg_py.svg_to_bytes(svg_string=id_svg(sheet, dl, k)))
+            im = np.asarray(Image.open(io.BytesIO(png)).convert("RGBA")).astype(np.int64)
+            got = np.where(im[..., 3] > 0, im[..., 0] | (im[..., 1] << 8) | (im[..., 2] << 16), 0)
+            pad = np.pad(ref, 1, mode="edge")
+            interior = np.ones(ref.shape, bool)  # multisampling blends ids on edges: judge interior pixels only
+            for dy in range(3):
+                for dx in range(3):
+                    interior &= pad[dy:dy + ref.shape[0], dx:dx + ref.shape[1]] == ref
+            valid = interior & (ref > 0) & (ref <= f) & (got > 0)
+            fracs.append(float((got[valid] != ref[valid]).mean()) if valid.any() else 0.0)
+    return {"max": max(fracs), "mean": float(np.mean(fracs)), "frames": len(fracs)}

@@ -1,0 +1,433 @@
+"""The verifier: evaluate an animated SVG's SMIL at every frame time and compare with the exact projection.
+
+It reads the SVG with lxml, takes the camera, frame rate and options from ``<metadata id="facesvg">``,
+re-loads the input (converter.formats.load plus the same 3D stages: frame range, triangle budget, ...),
+projects every frame with the metadata camera and measures, for every vertex of every path drawn at frame k
+(t = k / fps), its distance in output pixels from the exact projection, and for every triangle in the file
+the frames where it is drawn although culled or hidden although visible.
+
+SMIL support: <animate> of ``d``, ``class``, ``visibility`` and ``display`` with values, keyTimes (or even
+spacing), calcMode linear or discrete, dur, repeatCount; a static ``transform`` on ancestors and
+<animateTransform> (translate, scale, rotate, matrix-free forms) on ancestor groups; viewBox scaling.
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from lxml import etree
+
+from converter.errors import InputError
+
+SVG_NS = "{http://www.w3.org/2000/svg}"
+_TOKEN = re.compile(r"[MmLlZzHhVv]|[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+
+
+@dataclass
+class Verification:
+    """What the verifier measured."""
+
+    max_px: float
+    mean_px: float
+    vertex_frames: int  # drawn vertex-frames measured
+    visibility_mismatches: int  # (triangle, frame) pairs drawn/hidden wrongly
+    mismatch_frames: int  # frames with at least one visibility mismatch
+    tolerance: float
+    frames: int
+    paths: int
+    triangles: int
+    dropped_visible: int  # front-facing triangles absent from the file (never seen: occlusion pass)
+    worst: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        """Within the stated tolerance and no visibility mismatch."""
+        return self.max_px <= self.tolerance and self.visibility_mismatches == 0
+
+    def summary(self) -> str:
+        """One line for the CLI."""
+        return (f"max {self.max_px:.4f} px, mean {self.mean_px:.4f} px over {self.vertex_frames} drawn vertex-frames "
+                f"({self.paths} paths, {self.frames} frames); visibility mismatches {self.visibility_mismatches} "
+                f"in {self.mismatch_frames} frames; tolerance {self.tolerance:g} px: {'OK' if self.ok else 'FAIL'}")
+
+
+@dataclass
+class Evaluated:
+    """The SVG evaluated at every frame: per path the triangle, vertex positions (T, 3, 2) px and shown (T,)."""
+
+    meta: dict
+    triangles: np.ndarray  # int (P,)
+    xy: np.ndarray  # float64 (T, P, 3, 2) in viewport pixels
+    shown: np.ndarray  # bool (T, P)
+
+
+def read_svg(data: bytes) -> etree._Element:
+    """Parse SVG or SVGZ bytes; InputError when it is not XML."""
+    if data[:2] == b"\x1f\x8b":
+        try:
+            data = gzip.decompress(data)
+        except (OSError, EOFError):
+            raise InputError("the .svgz file is not valid gzip; regenerate it.") from None
+    parser = etree.XMLParser(resolve_entities=False, huge_tree=True, no_network=True)
+    try:
+        return etree.fromstring(data, parser)
+    except etree.XMLSyntaxError as exc:
+        raise InputError(f"the SVG is not well-formed XML ({exc}); regenerate it.") from None
+
+
+def metadata_of(root: etree._Element) -> dict:
+    """The facesvg metadata JSON of a parsed SVG."""
+    node = root.find(f".//{SVG_NS}metadata[@id='facesvg']")
+    if node is None or not (node.text or "").strip():
+        raise InputError("the SVG has no <metadata id=\"facesvg\">; only facesvg output can be verified.")
+    try:
+        return json.loads(node.text)
+    except json.JSONDecodeError:
+        raise InputError("the facesvg metadata is not valid JSON; the file is corrupt.") from None
+
+
+def _seconds(text: str | None) -> float:
+    if not text:
+        raise InputError("an <animate> has no dur; the file is corrupt.")
+    text = text.strip()
+    try:
+        if text.endswith("ms"):
+            return float(text[:-2]) / 1000
+        if text.endswith("s"):
+            return float(text[:-1])
+        if text.endswith("min"):
+            return float(text[:-3]) * 60
+        return float(text)
+    except ValueError:
+        raise InputError(f"dur {text!r} is not a clock value; the file is corrupt.") from None
+
+
+def _phase(anim: etree._Element, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Simple-duration fraction u (T,) of an animation at document times, and whether it is active."""
+    if anim.get("begin", "0").strip() not in ("0", "0s"):
+        raise InputError("only animations that begin at 0 can be verified.")
+    dur = _seconds(anim.get("dur"))
+    rc = anim.get("repeatCount")
+    total = math.inf if rc == "indefinite" or anim.get("repeatDur") == "indefinite" else dur * float(rc or 1)
+    u = np.mod(times, dur) / dur
+    done = times >= total
+    if anim.get("fill") == "freeze":
+        u = np.where(done, 1.0, u)
+        return u, np.ones_like(done)
+    return u, ~done
+
+
+def _key_index(anim: etree._Element, n: int, u: np.ndarray, discrete: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Segment index (T,) and fraction (T,) of u among the values' key times."""
+    kt_text = anim.get("keyTimes")
+    if kt_text:
+        kt = np.array([float(x) for x in kt_text.split(";")])
+        if len(kt) != n:
+            raise InputError("keyTimes and values differ in length; the file is corrupt.")
+    elif discrete:
+        kt = np.arange(n) / n
+    else:
+        kt = np.linspace(0.0, 1.0, n) if n > 1 else np.zeros(1)
+    i = np.clip(np.searchsorted(kt, u, side="right") - 1, 0, n - 1)
+    if discrete or n == 1:
+        return i, np.zeros_like(u)
+    i = np.minimum(i, n - 2)
+    span = kt[i + 1] - kt[i]
+    frac = np.clip((u - kt[i]) / np.where(span > 0, span, 1), 0, 1)
+    return i, frac
+
+
+def _triangle_of_d(d: str) -> list[float]:
+    """First three absolute vertices of a path made of M/L/H/V/Z commands (relative or absolute)."""
+    pts: list[tuple[float, float]] = []
+    cmd = ""
+    x = y = 0.0
+    nums: list[float] = []
+    for tok in _TOKEN.findall(d):
+        if tok.isalpha():
+            cmd, nums = tok, []
+            continue
+        nums.append(float(tok))
+        c = cmd.upper()
+        rel = cmd.islower()
+        if c in ("M", "L") and len(nums) == 2:
+            x, y = (x + nums[0], y + nums[1]) if rel else (nums[0], nums[1])
+            pts.append((x, y))
+            nums = []
+            if cmd in ("M", "m"):  # further pairs after M are implicit linetos
+                cmd = "l" if rel else "L"
+        elif c in ("H", "V") and len(nums) == 1:
+            if c == "H":
+                x = x + nums[0] if rel else nums[0]
+            else:
+                y = y + nums[0] if rel else nums[0]
+            pts.append((x, y))
+            nums = []
+        elif c not in ("M", "L", "H", "V"):
+            raise InputError(f"path command {cmd!r} is not a triangle; only M/L/H/V/Z paths can be verified.")
+    if len(pts) < 3:
+        raise InputError("a path has fewer than 3 vertices; the file is corrupt.")
+    return [pts[0][0], pts[0][1], pts[1][0], pts[1][1], pts[2][0], pts[2][1]]
+
+
+def _hidden_classes(root: etree._Element) -> set[str]:
+    names: set[str] = set()
+    for style in root.iter(f"{SVG_NS}style"):
+        for m in re.finditer(r"\.([\w-]+)\s*\{([^}]*)\}", style.text or ""):
+            body = m.group(2).replace(" ", "")
+            if "visibility:hidden" in body or "display:none" in body:
+                names.add(m.group(1))
+    return names
+
+
+def _hidden_value(attr: str, value: str, hidden_classes: set[str]) -> bool:
+    if attr == "class":
+        return bool(set(value.split()) & hidden_classes)
+    if attr == "visibility":
+        return value.strip() in ("hidden", "collapse")
+    return value.strip() == "none"  # display
+
+
+def _shown(el: etree._Element, times: np.ndarray, hidden_classes: set[str]) -> np.ndarray:
+    """Bool (T,): the element is not hidden by its class, visibility or display (static or animated)."""
+    hidden = np.zeros(len(times), bool)
+    for attr in ("class", "visibility", "display"):
+        base = _hidden_value(attr, el.get(attr, ""), hidden_classes)
+        state = np.full(len(times), base)
+        for anim in el.findall(f"{SVG_NS}animate[@attributeName='{attr}']"):
+            values = anim.get("values", "").split(";")
+            u, on = _phase(anim, times)
+            i, _ = _key_index(anim, len(values), u, discrete=True)  # strings never interpolate
+            flags = np.array([_hidden_value(attr, v, hidden_classes) for v in values])
+            state = np.where(on, flags[i], state)
+        hidden |= state
+    return ~hidden
+
+
+def _path_xy(el: etree._Element, times: np.ndarray) -> np.ndarray:
+    """(T, 6) vertex coordinates of a path's d, animated or not, in user units."""
+    base = el.get("d")
+    if base:
+        out = np.tile(np.array(_triangle_of_d(base), np.float64), (len(times), 1))
+    else:
+        out = np.full((len(times), 6), np.nan)
+    for anim in el.findall(f"{SVG_NS}animate[@attributeName='d']"):
+        mode = anim.get("calcMode", "linear")
+        if mode not in ("linear", "discrete"):
+            raise InputError(f"calcMode {mode!r} on d cannot be verified; use linear or discrete.")
+        values = np.array([_triangle_of_d(v) for v in anim.get("values", "").split(";") if v.strip()], np.float64)
+        if len(values) == 0:
+            raise InputError("an <animate> of d has no values; the file is corrupt.")
+        u, on = _phase(anim, times)
+        i, frac = _key_index(anim, len(values), u, discrete=mode == "discrete")
+        j = np.minimum(i + 1, len(values) - 1)
+        val = values[i] + frac[:, None] * (values[j] - values[i])
+        out = np.where(on[:, None], val, out)
+    return out
+
+
+def _parse_transform(text: str) -> np.ndarray:
+    """A 3x3 matrix for an SVG transform list."""
+    m = np.eye(3)
+    for name, args in re.findall(r"(\w+)\s*\(([^)]*)\)", text or ""):
+        a = [float(x) for x in _NUMBER.findall(args)]
+        m = m @ _transform_matrix(name, a)
+    return m
+
+
+def _transform_matrix(name: str, a: list[float]) -> np.ndarray:
+    t = np.eye(3)
+    if name == "matrix" and len(a) == 6:
+        t[0, :] = [a[0], a[2], a[4]]
+        t[1, :] = [a[1], a[3], a[5]]
+    elif name == "translate":
+        t[0, 2], t[1, 2] = a[0], (a[1] if len(a) > 1 else 0.0)
+    elif name == "scale":
+        t[0, 0], t[1, 1] = a[0], (a[1] if len(a) > 1 else a[0])
+    elif name == "rotate":
+        r = math.radians(a[0])
+        c, s = math.cos(r), math.sin(r)
+        rot = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+        if len(a) == 3:
+            return _transform_matrix("translate", a[1:]) @ rot @ _transform_matrix("translate", [-a[1], -a[2]])
+        t = rot
+    elif name == "skewX":
+        t[0, 1] = math.tan(math.radians(a[0]))
+    elif name == "skewY":
+        t[1, 0] = math.tan(math.radians(a[0]))
+    else:
+        raise InputError(f"transform {name}({a}) cannot be verified.")
+    return t
+
+
+def _group_matrices(g: etree._Element, times: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) transform of one element: static transform, then animateTransform (replace or sum)."""
+    base = _parse_transform(g.get("transform", ""))
+    out = np.broadcast_to(base, (len(times), 3, 3)).copy()
+    anims = g.findall(f"{SVG_NS}animateTransform")
+    if not anims:
+        return out
+    acc = None
+    for anim in anims:
+        kind = anim.get("type", "translate")
+        values = [[float(x) for x in _NUMBER.findall(v)] for v in anim.get("values", "").split(";") if v.strip()]
+        mode = anim.get("calcMode", "linear")
+        u, on = _phase(anim, times)
+        i, frac = _key_index(anim, len(values), u, discrete=mode == "discrete")
+        width = max(len(v) for v in values)
+        vals = np.array([v + [0.0] * (width - len(v)) if kind != "scale" or len(v) > 1 else v * 2 for v in values])
+        j = np.minimum(i + 1, len(values) - 1)
+        cur = vals[i] + frac[:, None] * (vals[j] - vals[i])
+        mats = np.stack([_transform_matrix(kind, list(row)) for row in cur])
+        mats = np.where(on[:, None, None], mats, np.eye(3))
+        if anim.get("additive") == "sum" and acc is not None:
+            acc = acc @ mats
+        elif anim.get("additive") == "sum":
+            acc = out @ mats
+        else:
+            acc = mats
+    return acc
+
+
+def evaluate(data: bytes) -> Evaluated:
+    """Evaluate every triangle path of a facesvg SVG at the frame times k / fps."""
+    root = read_svg(data)
+    meta = metadata_of(root)
+    try:
+        n_frames, fps = int(meta["frames"]), float(meta["fps"])
+        width, height = meta["viewport"]
+    except (KeyError, TypeError, ValueError):
+        raise InputError("the facesvg metadata lacks frames, fps or viewport; the file is corrupt.") from None
+    times = np.arange(n_frames) / fps
+    vb = [float(x) for x in _NUMBER.findall(root.get("viewBox", f"0 0 {width} {height}"))]
+    sx, sy = width / vb[2], height / vb[3]
+    view = np.array([[sx, 0, -vb[0] * sx], [0, sy, -vb[1] * sy], [0, 0, 1]])
+    hidden_classes = _hidden_classes(root)
+    tris, xys, shown = [], [], []
+    group_cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    for el in root.iter(f"{SVG_NS}path"):
+        m = re.fullmatch(r"f(\d+)[a-z]?", el.get("id", ""))
+        if not m:
+            continue
+        xy = _path_xy(el, times).reshape(len(times), 3, 2)
+        vis = _shown(el, times, hidden_classes)
+        mat = np.broadcast_to(view, (len(times), 3, 3))
+        for anc in reversed(list(el.iterancestors(f"{SVG_NS}g"))):
+            key = id(anc)
+            if key not in group_cache:
+                group_cache[key] = (_group_matrices(anc, times), _shown(anc, times, hidden_classes))
+            gm, gv = group_cache[key]
+            mat = mat @ gm
+            vis = vis & gv
+        xy = np.einsum("tij,tvj->tvi", mat[:, :2, :2], xy) + mat[:, None, :2, 2]
+        tris.append(int(m.group(1)))
+        xys.append(xy)
+        shown.append(vis)
+    if not tris:
+        raise InputError("the SVG has no triangle paths (id f<number>); only facesvg output can be verified.")
+    return Evaluated(meta, np.array(tris), np.stack(xys, axis=1), np.stack(shown, axis=1))
+
+
+def compare(ev: Evaluated, exact_xy: np.ndarray, expected_visible: np.ndarray, faces: np.ndarray,
+            tolerance: float) -> Verification:
+    """Deviation of every drawn vertex from exact_xy (T, V, 2) and visibility against expected (T, F)."""
+    t = ev.xy.shape[0]
+    if exact_xy.shape[0] != t:
+        raise InputError(f"the SVG has {t} frames but the input gives {exact_xy.shape[0]}; pass the same input.")
+    if ev.triangles.max() >= len(faces):
+        raise InputError("the SVG names triangles the input does not have; pass the input it was made from.")
+    exact = exact_xy[:, faces[ev.triangles]]  # (T, P, 3, 2)
+    dist = np.linalg.norm(ev.xy - exact, axis=-1)  # (T, P, 3)
+    dist = np.where(np.isnan(dist), np.inf, dist)
+    drawn = ev.shown[..., None] & np.ones(3, bool)
+    d = dist[drawn]
+    worst: dict[str, Any] = {}
+    if d.size:
+        k, p, v = np.unravel_index(np.argmax(np.where(drawn, dist, -1)), dist.shape)
+        worst = {"frame": int(k), "triangle": int(ev.triangles[p]), "vertex": int(v), "px": float(dist[k, p, v])}
+    tri_ids = np.unique(ev.triangles)
+    drawn_tri = np.zeros((t, len(faces)), bool)
+    np.logical_or.at(drawn_tri.T, ev.triangles, ev.shown.T)
+    wrong = drawn_tri[:, tri_ids] != expected_visible[:, tri_ids]
+    absent = np.ones(len(faces), bool)
+    absent[tri_ids] = False
+    return Verification(
+        max_px=float(d.max()) if d.size else 0.0,
+        mean_px=float(d.mean()) if d.size else 0.0,
+        vertex_frames=int(d.size),
+        visibility_mismatches=int(wrong.sum()),
+        mismatch_frames=int(wrong.any(axis=1).sum()),
+        tolerance=float(tolerance),
+        frames=t,
+        paths=len(ev.triangles),
+        triangles=len(tri_ids),
+        dropped_visible=int((expected_visible[:, absent].any(axis=0)).sum()),
+        worst=worst,
+    )
+
+
+def verify_animation(data: bytes, anim, tolerance: float | None = None) -> Verification:
+    """Verify SVG bytes against an already prepared FaceAnimation (the exact 3D the SVG should show)."""
+    from converter.camera import Camera
+    from converter.extract import cull
+
+    ev = evaluate(data)
+    camera = Camera.from_json(ev.meta["camera"])
+    xy, ndc_z, w = camera.project(anim.frames)
+    visible = cull(xy, ndc_z, w, anim.faces, camera.width, camera.height)
+    tol = tolerance if tolerance is not None else float(ev.meta.get("options", {}).get("tolerance", 0.25))
+    encoding = ev.meta.get("encoding", {})
+    if encoding.get("mode") == "still":  # a still (--frame K) shows frame K only
+        k = int(encoding.get("frame", 0))
+        if not 0 <= k < anim.n_frames or ev.xy.shape[0] != anim.n_frames:
+            raise InputError("the still's frame is not in the input; pass the input it was made from.")
+        ev = Evaluated(ev.meta, ev.triangles, ev.xy[k:k + 1], ev.shown[k:k + 1])
+        xy, visible = xy[k:k + 1], visible[k:k + 1]
+    return compare(ev, xy, visible, anim.faces, tol)
+
+
+def verify_file(svg_path: str | Path, input_path: str | Path, cache: str | Path | None = None,
+                tolerance: float | None = None) -> Verification:
+    """Verify an SVG written by facesvg against the input it was converted from."""
+    from converter import formats
+    from converter.convert import prepare
+    from converter.options import ConversionOptions, Report
+
+    try:
+        data = Path(svg_path).read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read {svg_path}: {exc.strerror}.") from None
+    meta = metadata_of(read_svg(data))
+    opts = meta.get("options", {})
+    options = ConversionOptions.from_mapping({k: v for k, v in opts.items() if not isinstance(v, (dict, list))})
+    anim = formats.load(input_path, fps=options.fps, cache=cache)
+    anim = prepare(anim, options, Report())
+    return verify_animation(data, anim, tolerance)
+
+
+def register_cli(subparsers) -> None:
+    """Add `facesvg verify OUT.svg INPUT [--cache FILE] [--tolerance PX] [--json]`."""
+    p = subparsers.add_parser("verify", help="check an SVG against the exact projection of its input")
+    p.add_argument("svg", help="the SVG (or .svgz) written by facesvg convert")
+    p.add_argument("input", help="the input animation it was converted from")
+    p.add_argument("--cache", help="PC2 or MDD point cache for an OBJ input")
+    p.add_argument("--tolerance", type=float, help="px bound to check (default: the SVG's stated tolerance)")
+    p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    p.set_defaults(func=_cmd_verify)
+
+
+def _cmd_verify(args) -> int:
+    result = verify_file(args.svg, args.input, cache=args.cache, tolerance=args.tolerance)
+    if args.json:
+        print(json.dumps({**result.__dict__, "ok": result.ok}, sort_keys=True))
+    else:
+        print(f"{args.svg}: {result.summary()}")
+    return 0 if result.ok else 1

@@ -1,0 +1,72 @@
+"""Triangle budget: one simplified topology on a subset of the vertices, animation carried over, error reported."""
+
+import numpy as np
+import pytest
+
+from converter import simplify
+from converter.convert import convert_animation
+from converter.errors import InputError
+from converter.options import ConversionOptions, Report
+from converter.verify import verify_animation
+from verify.ictface import ict_face
+
+
+@pytest.fixture(scope="module")
+def face():
+    return ict_face(16, front=3.0)
+
+
+def test_budget_keeps_a_vertex_subset_and_every_frame(face):
+    report = Report()
+    out = simplify.simplify(face, 1200, report, options=ConversionOptions(max_triangles=1200))
+    assert 600 < out.n_faces <= 1200 and out.n_frames == face.n_frames
+    # Every simplified vertex is an original vertex at every frame (half-edge collapse keeps a subset).
+    orig = {tuple(np.round(v, 5)) for v in face.frames[5]}
+    assert all(tuple(np.round(v, 5)) in orig for v in out.frames[5])
+    # Parts keep their identity and get a share of the budget.
+    assert set(out.part_ids.tolist()) == set(face.part_ids.tolist())
+    assert report.figures["budget_deviation_px"] >= report.figures["budget_deviation_mean_px"] > 0
+    assert report.counts["budget_triangles"] == out.n_faces
+    assert report.counts["budget_dropped_never_facing"] > 0
+
+
+def test_tighter_budget_deviates_more(face):
+    opts = ConversionOptions
+    loose, tight = Report(), Report()
+    simplify.simplify(face, 3000, loose, options=opts(max_triangles=3000))
+    simplify.simplify(face, 400, tight, options=opts(max_triangles=400))
+    assert tight.figures["budget_deviation_mean_px"] > loose.figures["budget_deviation_mean_px"]
+
+
+def test_motion_attributes_ignore_head_motion_and_see_the_jaw(face):
+    attrs = simplify.motion_attributes(face.frames)
+    moving = np.linalg.norm(attrs, axis=1)
+    # The face turns (rigid motion everywhere) but only the expressive regions deform.
+    assert np.percentile(moving, 95) > 10 * max(np.percentile(moving, 20), 1e-9)
+    mouth = np.unique(face.faces[face.part_ids == [p.name for p in face.parts].index("mouth")])
+    assert np.median(moving[mouth]) > 3 * np.median(moving)
+
+
+def test_simplify_with_attributes_binding_works_where_the_wrapper_does_not():
+    from verify.synth import grid
+
+    v, f = grid(12)
+    fn = simplify._simplify_with_attributes()
+    attrs = np.zeros((len(v), 2), np.float32)
+    out = simplify._part_simplify(fn, v.astype(np.float32), attrs, np.zeros(len(v), np.uint8), f, 40)
+    assert 0 < len(out) <= 60 and out.max() < len(v)
+
+
+def test_converted_budget_output_verifies(face):
+    result = convert_animation(face, ConversionOptions(size=128, max_triangles=800, occlusion=False))
+    assert result.report.counts["budget_triangles"] <= 800
+    assert result.report.counts["paths"] <= 800
+    assert "budget_deviation_px" in result.report.figures
+    simplified = simplify.simplify(face, 800, Report(), options=ConversionOptions(size=128, max_triangles=800,
+                                                                                   occlusion=False))
+    assert verify_animation(result.data, simplified).ok
+
+
+def test_too_small_budget_is_refused(face):
+    with pytest.raises(InputError, match="at least 4"):
+        simplify.simplify(face, 2, Report())

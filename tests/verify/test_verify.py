@@ -1,0 +1,170 @@
+"""The verifier: SMIL evaluation by hand, tolerance on the sample and on worst cases, and catching corruption."""
+
+import gzip
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from converter.convert import convert_animation
+from converter.errors import InputError
+from converter.options import ConversionOptions, Report
+from converter.verify import evaluate, verify_animation
+from converter.writers import svg_anim
+from verify.ictface import ict_face
+from verify.synth import fast_motion, flicker
+
+CLI = [sys.executable, "-m", "converter.cli"]
+META = ('<metadata id="facesvg">{"frames": 4, "fps": 2.0, "viewport": [10, 10], '
+        '"camera": {}, "options": {"tolerance": 0.25}}</metadata>')
+
+
+def hand_svg(body: str, viewbox: str = "0 0 20 20") -> bytes:
+    return (f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="{viewbox}" width="10" height="10">{META}'
+            f"<style>.h{{visibility:hidden}}</style><g>{body}</g></svg>").encode()
+
+
+def test_evaluates_keytimes_linear_discrete_and_viewbox_by_hand():
+    # 4 frames at 2 fps: dur 2 s, frames at u = 0, .25, .5, .75. viewBox is 2x the viewport.
+    svg = hand_svg(
+        '<path id="f0" d="M0 0l2 0 0 2z"><animate attributeName="d" dur="2s" repeatCount="indefinite" '
+        'keyTimes="0;.5;1" values="M0 0l2 0 0 2z;M8 4l2 0 0 2z;M8 4l2 0 0 2z"/>'
+        '<animate attributeName="class" calcMode="discrete" dur="2s" repeatCount="indefinite" '
+        'keyTimes="0;.7" values="a;h"/></path>'
+        '<path id="f1" d="M0 0L4 0L4 4Z" visibility="hidden"><animate attributeName="visibility" calcMode="discrete" '
+        'dur="2s" repeatCount="indefinite" values="hidden;visible"/></path>')
+    ev = evaluate(svg)
+    assert ev.triangles.tolist() == [0, 1]
+    first_vertex = ev.xy[:, 0, 0]  # frame-by-frame, in viewport px (viewBox units / 2)
+    np.testing.assert_allclose(first_vertex, [[0, 0], [2, 1], [4, 2], [4, 2]])
+    np.testing.assert_allclose(ev.xy[1, 0, 2], [3, 2])  # relative l: (4 + 0 + 2) / 2, (2 + 0 + 2) / 2
+    assert ev.shown[:, 0].tolist() == [True, True, True, False]  # class h from u = .7
+    assert ev.shown[:, 1].tolist() == [False, False, True, True]  # 2 evenly spaced discrete values
+    np.testing.assert_allclose(ev.xy[0, 1], [[0, 0], [2, 0], [2, 2]])
+
+
+@pytest.mark.parametrize("tolerance", [0.1, 0.25, 1.0])
+@pytest.mark.parametrize("make", [fast_motion, flicker], ids=["fast-motion", "flicker"])
+def test_worst_cases_within_tolerance(make, tolerance):
+    anim = make()
+    result = convert_animation(anim, ConversionOptions(size=256, tolerance=tolerance, occlusion=False))
+    v = verify_animation(result.data, anim)
+    assert v.tolerance == tolerance
+    assert v.max_px <= tolerance, v.summary()
+    assert v.visibility_mismatches == 0, v.summary()
+    assert v.vertex_frames > 1000
+
+
+def test_flicker_really_flickers():
+    anim = flicker()
+    result = convert_animation(anim, ConversionOptions(size=256, occlusion=False))
+    n_changes = len(re.findall(rb"values=\"[^\"]*;h", result.data))
+    assert n_changes >= 30  # most triangles hide and show again
+
+
+@pytest.fixture(scope="module")
+def ict_sheet():
+    from converter import extract
+
+    anim = ict_face(20, front=2.0, stride=3)
+    return anim, extract.extract(anim, extract.fit_camera(anim, 256), occlusion=False)
+
+
+@pytest.fixture(scope="module")
+def sample_sheet(sample_path):
+    from converter import extract, formats
+
+    anim = formats.load(sample_path)
+    return anim, extract.extract(anim, extract.fit_camera(anim, 256))
+
+
+@pytest.mark.parametrize("tolerance", [0.1, 0.25, 1.0])
+@pytest.mark.parametrize("which", ["ict", "sample"])
+def test_faces_within_tolerance(which, tolerance, ict_sheet, request):
+    anim, sheet = ict_sheet if which == "ict" else request.getfixturevalue("sample_sheet")
+    data = svg_anim.write(sheet, ConversionOptions(size=256, tolerance=tolerance), Report())
+    v = verify_animation(data, anim)
+    assert v.max_px <= tolerance and v.visibility_mismatches == 0, v.summary()
+    assert v.paths > 500 and v.frames == anim.n_frames
+
+
+def test_sample_through_cli_svgz(sample_path, tmp_path):
+    out = tmp_path / "face.svgz"
+    r = subprocess.run([*CLI, "convert", sample_path, "-o", out, "--size", "128", "--tolerance", "0.1", "--svgz",
+                        "--end", "40", "-q"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert out.read_bytes()[:2] == b"\x1f\x8b"
+    r = subprocess.run([*CLI, "verify", out, sample_path, "--json"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+    import json
+
+    figures = json.loads(r.stdout)
+    assert figures["max_px"] <= 0.1 and figures["visibility_mismatches"] == 0 and figures["frames"] == 40
+
+
+def _corrupt_one_value(svg: bytes, delta: int) -> bytes:
+    """Move one coordinate of one key of the first animated path by delta viewBox units."""
+    m = re.search(rb'values="M(\d+) ', svg)
+    return svg[: m.start(1)] + str(int(m.group(1)) + delta).encode() + svg[m.end(1):]
+
+
+def test_verifier_catches_a_moved_key(tmp_path):
+    anim = fast_motion()
+    good = convert_animation(anim, ConversionOptions(size=256, occlusion=False)).data
+    assert verify_animation(good, anim).ok
+    bad = verify_animation(_corrupt_one_value(good, 40), anim)
+    assert not bad.ok and bad.max_px > 1.0
+    # One unit of the scaled viewBox is below the tolerance: a tiny corruption may pass, but is measured.
+    tiny = verify_animation(_corrupt_one_value(good, 1), anim)
+    assert tiny.max_px > 0
+
+
+def test_verifier_catches_wrong_visibility():
+    anim = flicker()
+    good = convert_animation(anim, ConversionOptions(size=256, occlusion=False)).data
+    bad = re.sub(rb'values="c(\d+);h', rb'values="c\1;c\1', good, count=3)
+    v = verify_animation(bad, anim)
+    assert v.visibility_mismatches > 0 and v.mismatch_frames > 0 and not v.ok
+
+
+def test_cli_verify_fails_on_corrupt_file_and_refuses_garbage(sample_path, tmp_path):
+    out = tmp_path / "face.svg"
+    r = subprocess.run([*CLI, "convert", sample_path, "-o", out, "--size", "128", "--end", "12", "-q"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    ok = subprocess.run([*CLI, "verify", out, sample_path], capture_output=True, text=True)
+    assert ok.returncode == 0 and "OK" in ok.stdout, ok.stdout + ok.stderr
+    out.write_bytes(_corrupt_one_value(out.read_bytes(), 60))
+    bad = subprocess.run([*CLI, "verify", out, sample_path], capture_output=True, text=True)
+    assert bad.returncode == 1 and "FAIL" in bad.stdout
+    garbage = tmp_path / "g.svg"
+    garbage.write_bytes(b"<svg><oops")
+    r = subprocess.run([*CLI, "verify", garbage, sample_path], capture_output=True, text=True)
+    assert r.returncode == 2 and "Traceback" not in r.stderr and "not well-formed" in r.stderr
+
+
+@pytest.mark.parametrize("data,needle", [
+    (b"not xml at all", "not well-formed"),
+    (b'<svg xmlns="http://www.w3.org/2000/svg"/>', "metadata"),
+    (gzip.compress(b"<svg")[:10], "gzip"),
+])
+def test_bad_svgs_raise_one_clear_error(data, needle):
+    with pytest.raises(InputError, match=needle):
+        evaluate(data)
+
+
+def test_other_input_is_refused():
+    svg = convert_animation(fast_motion(), ConversionOptions(size=64, occlusion=False)).data
+    with pytest.raises(InputError, match="frames"):
+        verify_animation(svg, fast_motion(n_frames=12))
+
+
+def test_still_frames_verify_against_their_frame():
+    anim = fast_motion()
+    data = convert_animation(anim, ConversionOptions(size=128, frame=9, occlusion=False)).data
+    v = verify_animation(data, anim)
+    assert v.ok and v.frames == 1 and v.vertex_frames > 100
+    wrong = data.replace(b'"frame":9', b'"frame":10')
+    assert not verify_animation(wrong, anim).ok

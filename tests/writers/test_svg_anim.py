@@ -1,0 +1,135 @@
+"""The animated SVG writer: raw, the chapter's post-optimisations, and the error-bounded default encoding."""
+
+import gzip
+import re
+
+import numpy as np
+from conftest import cube_animation
+from lxml import etree
+
+from converter import extract
+from converter.animation import FaceAnimation, Part
+from converter.convert import convert_animation
+from converter.options import ConversionOptions, Report
+from converter.verify import verify_animation
+from converter.writers import svg_anim
+from verify.synth import grid
+
+SVG = "{http://www.w3.org/2000/svg}"
+
+
+def half_moving(n_frames: int = 40) -> FaceAnimation:
+    """A grid whose left half is still and whose right half waves; one extra triangle always faces away."""
+    v, faces = grid(6)
+    t = np.arange(n_frames)[:, None]
+    frames = np.repeat(v[None], n_frames, axis=0)
+    right = v[:, 0] > 0.01
+    frames[:, right, 1] += 0.2 * np.sin(t / 4.0) * v[right, 0]
+    back = np.array([[0, 0, -0.5], [0.2, 0, -0.5], [0, 0.2, -0.5]])  # clockwise seen from +z: a back face
+    frames = np.concatenate([frames, np.repeat(back[None], n_frames, 0)[:, ::-1]], axis=1)
+    faces = np.concatenate([faces, [[len(v), len(v) + 1, len(v) + 2]]]).astype(np.int32)
+    return FaceAnimation(frames.astype(np.float32), faces, np.zeros(len(faces), np.int32),
+                         (Part("skin", (0.8, 0.6, 0.5)),), 20.0, "half")
+
+
+def sheet_of(anim, size=128):
+    return extract.extract(anim, extract.fit_camera(anim, size), occlusion=False)
+
+
+def paths(svg: bytes):
+    return etree.fromstring(svg).findall(f".//{SVG}path")
+
+
+def test_raw_writes_every_frame_with_two_decimals():
+    anim = cube_animation(6)
+    data = convert_animation(anim, ConversionOptions(size=64, raw=True, occlusion=False)).data
+    for p in paths(data):
+        values = p.find(f"{SVG}animate[@attributeName='d']").get("values").split(";")
+        assert len(values) == anim.n_frames + 1  # every frame plus the held loop end
+        assert all(re.fullmatch(r"M-?\d+\.\d\d,-?\d+\.\d\dL.*Z", v) for v in values)
+    v = verify_animation(data, anim)
+    assert v.ok and v.max_px <= 0.0071
+
+
+def test_chapter_drops_hidden_coordinates_and_merges_still_runs():
+    anim = half_moving()
+    sheet = sheet_of(anim)
+    raw = svg_anim.encode(sheet, ConversionOptions(), Report(), "raw")
+    report = Report()
+    chapter = svg_anim.encode(sheet, ConversionOptions(), report, "chapter")
+    assert len(chapter) < 0.8 * len(raw)
+    still = [p for p in paths(chapter) if p.find(f"{SVG}animate[@attributeName='d']") is None]
+    assert len(still) >= 20  # the left half does not move: no coordinates animated at all
+    v = verify_animation(chapter, anim)
+    assert v.ok and v.max_px <= 0.0071  # exact to 2 decimals
+
+
+def test_bounded_default_is_small_static_shared_and_drops_never_visible():
+    anim = half_moving()
+    sheet = sheet_of(anim)
+    assert not sheet.visible[:, -1].any()
+    raw = svg_anim.encode(sheet, ConversionOptions(), Report(), "raw")
+    data = svg_anim.write(sheet, ConversionOptions(), Report())
+    assert len(data) < 0.3 * len(raw)
+    ps = paths(data)
+    ids = [p.get("id") for p in ps]
+    assert f"f{anim.n_faces - 1}" not in ids and len(ids) == anim.n_faces - 1
+    still = [p for p in ps if p.find(f"{SVG}animate") is None]
+    assert len(still) >= 20
+    assert all(re.fullmatch(r"M\d+ \d+l[-\d ]+z", p.get("d")) for p in ps)  # integers, relative, shortest
+    classes = {p.get("class") for p in ps}
+    assert len(classes) < len(ps) / 3  # fills shared through CSS classes
+    root = etree.fromstring(data)
+    w, vb = float(root.get("width")), [float(x) for x in root.get("viewBox").split()]
+    assert vb[2] / w == svg_anim.viewbox_scale(0.25)
+    v = verify_animation(data, anim)
+    assert v.ok, v.summary()
+
+
+def test_tighter_tolerance_costs_more_and_stays_within():
+    anim = half_moving()
+    sheet = sheet_of(anim)
+    sizes = []
+    for tol in (1.0, 0.25, 0.1):
+        data = svg_anim.write(sheet, ConversionOptions(tolerance=tol), Report())
+        assert verify_animation(data, anim).max_px <= tol
+        sizes.append(len(data))
+    assert sizes[0] < sizes[1] < sizes[2]
+
+
+def test_colour_keys_stay_within_colour_tolerance():
+    rng = np.random.default_rng(0)
+    t = np.arange(60)[:, None, None]
+    rgb = np.clip(0.5 + 0.3 * np.sin(t / rng.uniform(3, 20, (1, 25, 3))), 0, 1)
+    active = rng.random((60, 25)) > 0.15
+    keys = svg_anim.color_keys(rgb, active, 3.0)
+    from converter.keyframes import interpolate
+
+    shown = interpolate(keys)
+    assert np.abs(shown - rgb * 255)[active].max() <= 3.0 + 1e-9
+    assert np.all(keys.values == np.rint(keys.values))
+
+
+def test_deterministic_and_svgz():
+    anim = half_moving()
+    a = convert_animation(anim, ConversionOptions(size=96, occlusion=False)).data
+    b = convert_animation(anim, ConversionOptions(size=96, occlusion=False)).data
+    assert a == b
+    z = convert_animation(anim, ConversionOptions(size=96, occlusion=False, svgz=True))
+    assert z.extension == ".svgz" and z.data[:2] == b"\x1f\x8b"
+    assert verify_animation(gzip.decompress(z.data), anim).ok and verify_animation(z.data, anim).ok
+    assert z.report.sizes["svg"] == len(gzip.decompress(z.data)) and z.report.sizes["output"] == len(z.data)
+
+
+def test_still_frame_is_static_and_exact_to_grid():
+    anim = half_moving()
+    data = convert_animation(anim, ConversionOptions(size=96, frame=7, occlusion=False)).data
+    assert b"<animate" not in data and len(paths(data)) == anim.n_faces - 1
+
+
+def test_raw_size_is_counted_exactly_without_writing():
+    rng = np.random.default_rng(4)
+    track = rng.uniform(-150, 1500, (9, 7, 6))
+    track[0, 0, 0] = -0.004  # rounds to zero: written and counted without a sign
+    per_path = [";".join(svg_anim._raw_strings(track[:, j]) + svg_anim._raw_strings(track[-1:, j])) for j in range(7)]
+    assert svg_anim.raw_values_bytes(track) == sum(len(v) for v in per_path)
