@@ -51,6 +51,8 @@ def add_conversion_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-triangles", type=int, help="triangle budget")
     p.add_argument("--no-occlusion", dest="occlusion", action="store_false", help="keep never-seen triangles")
     p.add_argument("--svgz", action="store_true", help="gzip the SVG")
+    p.add_argument("--depth-layers", action="store_true",
+                   help="experimental: layer copies for triangles whose depth order flips")
     p.add_argument("--no-rigid", dest="rigid", action="store_false",
                    help="do not factor rigid 2D motion into animated group transforms")
     p.add_argument("--smooth", type=float, help="temporal smoothing, Gaussian sigma in frames (default 0: off)")

@@ -39,7 +39,7 @@ class ConversionOptions:
     raw: bool = False  # every frame written, no keyframe reduction (the chapter's unoptimised encoding)
     max_triangles: int | None = None  # triangle budget (simplify once, shared by every frame)
     occlusion: bool = True  # drop triangles never seen in any frame (triangle-id render)
-    depth_layers: bool = True  # split triangles whose depth order flips into animated layers
+    depth_layers: bool = False  # experimental: extra layer copies of triangles whose depth order flips
     rigid: bool = True  # factor rigid 2D motion per part into animated group transforms
     smooth: float = 0.0  # temporal smoothing strength (0 = off)
     svgz: bool = False  # gzip the SVG
