@@ -30,7 +30,7 @@ def write_obj_pc2(anim, stem: Path) -> tuple[Path, Path]:
     return obj, pc2
 
 
-def measure(path: Path, cache: Path | None, label: str) -> list[str]:
+def measure(path: Path, cache: Path | None, label: str, stem: str) -> list[str]:
     """Median seconds over REPEATS for load, extract and write of one input with default options."""
     from converter import convert as conv
     from converter.options import ConversionOptions
@@ -46,7 +46,7 @@ def measure(path: Path, cache: Path | None, label: str) -> list[str]:
         extracts.append(result.report.timings.get("extract", 0.0))
         writes.append(result.report.timings.get("write", 0.0))
     c = result.report.counts
-    (OUT / f"{label}.svg").write_bytes(result.data)
+    (OUT / f"spine_{stem}.svg").write_bytes(result.data)
     return [
         label,
         str(c["frames"]),
@@ -66,9 +66,9 @@ def run() -> str:
     from faces import ict_bench_face
 
     OUT.mkdir(parents=True, exist_ok=True)
-    rows = [measure(ROOT / "samples" / "face.glb", None, "sample (samples/face.glb)")]
+    rows = [measure(ROOT / "samples" / "face.glb", None, "sample (samples/face.glb)", "sample")]
     obj, pc2 = write_obj_pc2(ict_bench_face(), OUT / "ict_bench")
-    rows.append(measure(obj, pc2, "ICT bench face (OBJ + PC2)"))
+    rows.append(measure(obj, pc2, "ICT bench face (OBJ + PC2)", "ict"))
     head = "| input | frames | triangles | load s | extract s | write s | SVG bytes |\n|---|---|---|---|---|---|---|\n"
     body = "\n".join("| " + " | ".join(r) + " |" for r in rows)
     return (
