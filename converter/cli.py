@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 from converter.errors import FacesvgError
+from converter.userfiles import check_output
 
 
 class ProgressBar:
@@ -80,11 +81,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
     options = options_from_args(args)
     suffix = ".zip" if options.to == "fap2d" else (".svgz" if options.svgz else ".svg")
-    out = Path(args.output) if args.output else Path(args.input).with_suffix(suffix)
-    if out.exists() and out.is_dir():
-        raise_input(f"output {out} is a folder; give a file name.")
-    if not out.parent.exists():
-        raise_input(f"the output folder {out.parent} does not exist.")
+    out = check_output(args.output if args.output else Path(args.input).with_suffix(suffix))
     result = convert(args.input, options, progress=ProgressBar(not args.quiet and sys.stderr.isatty() or args.progress),
                      cache=args.cache)
     write_atomic(out, result.data)

@@ -6,6 +6,8 @@ import argparse
 import time
 from pathlib import Path
 
+from converter.userfiles import check_output
+
 
 def cmd_clone(args: argparse.Namespace) -> int:
     """Clone the source animation onto the target face and write a GLB."""
@@ -18,8 +20,7 @@ def cmd_clone(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if out.suffix.lower() != ".glb":
         raise_input(f"the output must be a .glb file, got {out.name}.")
-    if not out.parent.exists():
-        raise_input(f"the output folder {out.parent} does not exist.")
+    check_output(out)
     t = time.perf_counter()
     source = formats.load(args.source, cache=args.cache)
     target = formats.load(args.target)

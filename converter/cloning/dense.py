@@ -131,13 +131,13 @@ def read_correspondences(path: str | None, source: np.ndarray, target: np.ndarra
     if not path:
         return np.zeros((0, 3)), np.zeros((0, 3))
     import json
-    from pathlib import Path
 
+    from converter.userfiles import read_bytes
+
+    raw = read_bytes(path, "correspondence file")
     try:
-        data = json.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise InputError(f"correspondence file {path} does not exist.") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        data = json.loads(raw)
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise InputError(f"correspondence file {path} is not JSON ({exc}); write {{\"pairs\": [[s, t], ...]}}.") from None
     pairs = data.get("pairs") if isinstance(data, dict) else None
     if not isinstance(pairs, list) or not pairs:

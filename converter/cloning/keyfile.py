@@ -19,6 +19,7 @@ import numpy as np
 
 from converter.cloning.example_based import KeyPairs
 from converter.errors import InputError
+from converter.userfiles import read_bytes
 from converter.formats.obj import parse_obj_vertices
 
 KINDS = ("emotional", "verbal", "other")
@@ -27,10 +28,9 @@ KINDS = ("emotional", "verbal", "other")
 def read(path: str | Path, source_base: np.ndarray, target_base: np.ndarray) -> KeyPairs:
     """KeyPairs from a zip file; source_base / target_base are used when the manifest names no base."""
     path = Path(path)
+    raw = read_bytes(path, "key-model file")
     try:
-        zf = zipfile.ZipFile(io.BytesIO(path.read_bytes()))
-    except FileNotFoundError:
-        raise InputError(f"key-model file {path} does not exist.") from None
+        zf = zipfile.ZipFile(io.BytesIO(raw))
     except (zipfile.BadZipFile, OSError):
         raise InputError(f"{path.name} is not a zip file; pack manifest.json and the key-model OBJs into a zip.") from None
     with zf:

@@ -85,11 +85,11 @@ def detect(verts: np.ndarray, faces: np.ndarray) -> dict[str, np.ndarray]:
     if i_top is not None:
         centre("glabella", _first_after(mx, i_top, +1))
     i = centre("nose_bottom", _first_after(mn, i_tip, -1))
-    i_mouth = i_chin = None
+    i_chin = None
     if i is not None:
         i = centre("lip_top", _first_after(mx, i, -1))
     if i is not None:
-        i_mouth = i = centre("mouth", _first_after(mn, i, -1))
+        i = centre("mouth", _first_after(mn, i, -1))
     if i is not None:
         i = centre("lip_bottom", _first_after(mx, i, -1))
     if i is not None:

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from converter.animation import FaceAnimation
 from converter.errors import InputError
+from converter.userfiles import read_bytes
 
 MAX_INPUT_BYTES = 1 << 30
 
@@ -35,14 +36,7 @@ def load(path: str | Path, fps: float | None = None, cache: str | Path | None = 
 
 
 def _load(path: Path, fps: float | None, cache: str | Path | None) -> FaceAnimation:
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError(f"{path} does not exist.") from None
-    except IsADirectoryError:
-        raise InputError(f"{path} is a folder; give a file.") from None
-    except OSError as exc:
-        raise InputError(f"cannot read {path}: {exc.strerror}.") from None
+    data = read_bytes(path)
     if not data:
         raise InputError(f"{path.name} is empty.")
     kind = sniff(data)
@@ -59,7 +53,4 @@ def _load(path: Path, fps: float | None, cache: str | Path | None) -> FaceAnimat
 
     if cache is None:
         raise InputError(f"{path.name} is a single OBJ mesh; give its animation with --cache FILE.pc2|.mdd.")
-    cache_path = Path(cache)
-    if not cache_path.is_file():
-        raise InputError(f"point cache {cache_path} does not exist.")
-    return pointcache.load_obj_cache(data, cache_path.read_bytes(), fps=fps, name=name)
+    return pointcache.load_obj_cache(data, read_bytes(cache, "point cache"), fps=fps, name=name)

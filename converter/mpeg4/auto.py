@@ -147,7 +147,6 @@ def auto_fdp(face: FaceAnimation) -> tuple[Fdp, AutoReport]:
         biggest = np.bincount(label[used]).argmax()
         skin = used[label[used] == biggest]
     width = float(np.ptp(v[skin, 0]))
-    height = float(np.ptp(v[skin, 1]))
     x0 = float((v[skin, 0].min() + v[skin, 0].max()) / 2)
     parts: dict[str, np.ndarray] = _eyeballs(v, faces, names, face.part_ids, skin, report)
     pts: dict[str, int] = {}

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from converter.errors import InputError
+from converter.userfiles import check_output
 
 
 def load_static_face(path: str | Path):
@@ -37,8 +38,7 @@ def cmd_fdp(args: argparse.Namespace) -> int:
     fdp, report = auto_fdp(face)
     stem = Path(args.input).name.split(".")[0]
     out = Path(args.output) if args.output else Path(args.input).with_name(f"{stem}.fdp.json")
-    if not out.parent.exists():
-        raise InputError(f"the output folder {out.parent} does not exist.")
+    check_output(out)
     write_atomic(out, fdp_to_json(fdp).encode())
     print(f"{out}: {len(fdp.points)} feature points, parts: {', '.join(sorted(fdp.parts)) or 'none'}")
     print("FAPU: " + ", ".join(f"{k}={v:.4g}" for k, v in fdp.fapu.items()))
@@ -58,8 +58,7 @@ def cmd_fap_loa(args: argparse.Namespace) -> int:
     reduced = loa.reduce(stream, args.level)
     text = write_fap(reduced).encode()
     out = Path(args.output)
-    if not out.parent.exists():
-        raise InputError(f"the output folder {out.parent} does not exist.")
+    check_output(out)
     write_atomic(out, text)
     print(f"{out}: LoA {args.level}, {loa.fap_count(args.level)} FAPs, {int(reduced.mask.any(0).sum())} used, "
           f"{len(text)} bytes ({100 * len(text) / original:.1f}% of {original})")

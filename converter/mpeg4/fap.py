@@ -17,6 +17,7 @@ import numpy as np
 
 from converter.errors import InputError
 from converter.mpeg4.standard import N_FAPS
+from converter.userfiles import read_bytes
 
 VERSIONS = ("2.0", "2.1")
 FAP1_VALUES = 4  # viseme_select1, viseme_select2, viseme_blend, viseme_def
@@ -77,12 +78,7 @@ def read_fap(source: str | Path) -> FapStream:
     """Parse a .fap file (a path, or the text itself when it contains a newline); InputError names the line."""
     if isinstance(source, Path) or ("\n" not in source and len(source) < 4096):
         path = Path(source)
-        try:
-            raw = path.read_bytes()
-        except FileNotFoundError:
-            raise InputError(f"FAP file {path} does not exist.") from None
-        except OSError as exc:
-            raise InputError(f"cannot read FAP file {path}: {exc.strerror}.") from None
+        raw = read_bytes(path, "FAP file")
         text = raw.decode("utf-8", errors="replace")
     else:
         text = source

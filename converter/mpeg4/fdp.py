@@ -19,6 +19,7 @@ import numpy as np
 
 from converter.errors import InputError
 from converter.mpeg4.standard import FAPU_NAMES, FEATURE_POINTS
+from converter.userfiles import read_bytes
 
 FORMAT = "facesvg-fdp"
 PART_NAMES = ("left_eye", "right_eye", "upper_teeth", "lower_teeth", "tongue")
@@ -230,12 +231,7 @@ def parse_xface_fdp(text: str | bytes, name: str = "FDP") -> Fdp:
 def load_fdp(path: str | Path, vertices: np.ndarray | None = None) -> Fdp:
     """Read an FDP (facesvg JSON or Xface XML, told apart by content); with vertices, validate and fill FAPU."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError(f"FDP file {path} does not exist; pass --fdp or run `facesvg fdp INPUT --auto`.") from None
-    except OSError as exc:
-        raise InputError(f"cannot read FDP file {path}: {exc.strerror}.") from None
+    raw = read_bytes(path, "FDP file", "; pass --fdp or run `facesvg fdp INPUT --auto`")
     head = raw.lstrip()[:1]
     if head == b"{":
         try:

@@ -9,9 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from converter.errors import InputError
+from converter.userfiles import read_bytes
 from converter.mpeg4 import influence
 from converter.mpeg4.fdp import Fdp, fapu_from_points
-from converter.mpeg4.standard import FAPU_NAMES, N_FAPS, fap_table
+from converter.mpeg4.standard import FAPU_NAMES, fap_table
 
 FORMAT = "facesvg-facedeftables"
 
@@ -102,11 +103,10 @@ class FaceDefTables:
     def load(cls, path: str | Path) -> "FaceDefTables":
         """Read a tables JSON file."""
         path = Path(path)
+        raw = read_bytes(path, "tables file")
         try:
-            data = json.loads(path.read_bytes())
-        except FileNotFoundError:
-            raise InputError(f"tables file {path} does not exist.") from None
-        except (OSError, ValueError) as exc:
+            data = json.loads(raw)
+        except ValueError as exc:
             raise InputError(f"cannot read tables file {path}: {exc}.") from None
         return cls.from_json(data, path.name)
 

@@ -13,7 +13,7 @@ from converter.errors import InputError
 from converter.formats import load
 from converter.formats.gltf import load_gltf
 from converter.formats.gltf_build import ARRAY_BUFFER, GltfBuilder
-from tests.formats.helpers import TRI, add_track, triangle_scene
+from tests.formats.helpers import add_track, triangle_scene
 
 HERE = Path(".")
 
