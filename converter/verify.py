@@ -312,7 +312,8 @@ def evaluate(data: bytes) -> Evaluated:
     view = np.array([[sx, 0, -vb[0] * sx], [0, sy, -vb[1] * sy], [0, 0, 1]])
     hidden_classes = _hidden_classes(root)
     tris, xys, shown = [], [], []
-    group_cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    group_cache: dict[etree._Element, tuple[np.ndarray, np.ndarray]] = {}  # keyed by element: id() of a freed
+    # lxml proxy is reused by the next one, which handed nested groups another group's transform
     for el in root.iter(f"{SVG_NS}path"):
         m = re.fullmatch(r"f(\d+)[a-z]?", el.get("id", ""))
         if not m:
@@ -321,7 +322,7 @@ def evaluate(data: bytes) -> Evaluated:
         vis = _shown(el, times, hidden_classes)
         mat = np.broadcast_to(view, (len(times), 3, 3))
         for anc in reversed(list(el.iterancestors(f"{SVG_NS}g"))):
-            key = id(anc)
+            key = anc
             if key not in group_cache:
                 group_cache[key] = (_group_matrices(anc, times), _shown(anc, times, hidden_classes))
             gm, gv = group_cache[key]

@@ -210,11 +210,20 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     dur = f"{sheet.duration:.6f}".rstrip("0").rstrip(".") + "s"  # SMIL clock values need the leading digit
     track = sheet.xy[:, sheet.faces[tris]].reshape(t, p, 6).astype(np.float64)
     extra: dict = {"encoding": {"mode": mode}}
+    plan = None
+    if mode == "bounded" and options.rigid and p:
+        from converter import rigid  # rigid 2D motion factored into animated group transforms
+
+        plan = rigid.plan_for(sheet, options, tris, active, track, dur)
+        if plan.opens:  # else nothing pays for a group: the plain encoding, byte for byte
+            tris, active, track = tris[plan.order], active[:, plan.order], plan.track
+        else:
+            plan = None
     if mode in ("raw", "chapter"):
         body = _encode_raw(sheet, tris, active, track, dur, chapter=mode == "chapter")
         scale = 1
     else:
-        body, scale, enc = _encode_keyed(sheet, options, tris, active, track, dur, report)
+        body, scale, enc = _encode_keyed(sheet, options, tris, active, track, dur, report, plan)
         extra["encoding"].update(enc)
     head = [_header(sheet, scale), metadata(sheet, options, report, extra, order=tris),
             f"<title>{escape(sheet.name)}</title>"]
@@ -349,7 +358,8 @@ def _uniform_instead(track: np.ndarray, active: np.ndarray, mask: np.ndarray, te
         todo, cand = todo[worth], cand[worth]
         for n in np.unique(cand).tolist():
             idx = todo[cand == n]
-            q, ok = keyframes.uniform_fit(track[:, idx], active[:, idx], n, scale, radius)
+            q, ok = keyframes.uniform_fit(track[:, idx], active[:, idx], n, scale,
+                                          radius if np.isscalar(radius) else radius[idx])
             for j, col in zip(idx[ok].tolist(), np.flatnonzero(ok).tolist()):
                 chosen[j] = n
                 values[j] = q[:, col]
@@ -367,23 +377,29 @@ def _uniform_instead(track: np.ndarray, active: np.ndarray, mask: np.ndarray, te
 
 
 def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, active: np.ndarray,
-                  track: np.ndarray, dur: str, report: Report) -> tuple[list[str], int, dict]:
-    """The error-bounded integer encoding (module docstring)."""
+                  track: np.ndarray, dur: str, report: Report, plan=None) -> tuple[list[str], int, dict]:
+    """The error-bounded integer encoding (module docstring); plan: converter.rigid.Plan (local tracks)."""
     t, p = active.shape
     tol = options.tolerance
     view_scale = viewbox_scale(tol)
     time_budget = TIME_SHARE * tol
     float_err = 1e-4 + 2e-7 * max(sheet.camera.width, sheet.camera.height)
     radius = tol - math.sqrt(0.5) / view_scale - time_budget - float_err  # Euclidean px left for keyframing
+    bound = tol - float_err
+    if plan is not None:  # per path: local px, scaled down by the error gain of the path's group transform
+        radius, bound = plan.radius, bound / plan.gain
     keys = keyframes.reduce(keyframes.octagon_tracks(track), active, radius * keyframes.OCTAGON, bend=True)
     q = np.rint(keys.values[..., :6] * view_scale).astype(np.int64)
-    if t > 1:
+    if plan is not None:
+        step = plan.speed
+    elif t > 1:
         step = np.linalg.norm(np.diff(track.reshape(t, p, 3, 2), axis=0), axis=-1).max(axis=(0, 2))
     else:
         step = np.zeros(p)
     decimals = key_time_decimals(t, step, tol, time_budget)
     color_tol = COLOR_TOLERANCE
-    enc = {"scale": view_scale, "tolerance": tol, "fit_px": round(radius, 6), "color_levels": color_tol,
+    enc = {"scale": view_scale, "tolerance": tol, "fit_px": round(float(np.min(radius)), 6),
+           "color_levels": color_tol,
            "keytime_decimals": [int(decimals.min()), int(decimals.max())] if p else []}
     tables = {dj: key_time_strings(t, dj, discrete=False) for dj in set(decimals.tolist()) | {6}}
     kt_of = [tables[dj] for dj in decimals.tolist()]
@@ -394,7 +410,7 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
     moving = _varying(keys.mask, rows)
     d_anims, d_first, n_keys = _linear("d", keys.mask, text, kt_of, dur, moving)
     n_uniform = _uniform_instead(track, active, keys.mask, text, decimals, moving, view_scale,
-                                 tol - float_err, dur, d_anims)
+                                 bound, dur, d_anims)
     # Colour: linear keys within the colour tolerance; the first key's colour is the path's class.
     ckeys = color_keys(sheet.face_rgb[:, tris], active, color_tol)
     cpk, cfk = np.nonzero(ckeys.mask.T)
@@ -419,14 +435,22 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
     v_anims = _discrete("class", codes, names, key_time_strings(t, disc_decimals, discrete=True), dur)
     out = [_style(palette, view_scale), "<g>"]
     ids = path_ids(tris)
+    opens, closes = (plan.opens, plan.closes) if plan is not None else ({}, frozenset())
     for j in range(p):
+        if j in opens:
+            out.append(opens[j])
         body = d_anims[j] + c_anims[j] + v_anims[j]
         el = f'<path id="{ids[j]}" class="{names[codes[0, j]]}" d="{d_first[j]}"'
         out.append(f"{el}>{body}</path>" if body else f"{el}/>")
+        if j in closes:
+            out.append("</g>")
     report.counts["keys"] = n_keys
     report.counts["uniform_paths"] = n_uniform
     report.counts["color_keys"] = n_color_keys
     report.counts["static_paths"] = int((~moving).sum())
     report.counts["palette"] = len(palette)
     report.figures["keys_per_path"] = n_keys / max(p, 1)
+    if plan is not None:
+        report.counts.update({f"rigid_{k}": int(v) for k, v in plan.stats.items() if k != "max_gain"})
+        enc["rigid"] = {"groups": len(opens), "max_gain": round(plan.stats["max_gain"], 6)}
     return out, view_scale, enc

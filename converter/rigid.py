@@ -1,0 +1,497 @@
+"""Rigid-motion factoring: per band of triangles an animated 2D affine group transform, residuals in its frame.
+
+Captured faces sway and jitter as a whole; encoding every triangle's screen motion repeats that motion in every
+path. Here the triangles are split into *bands* (each part's connected pieces — skin, each eye, each iris,
+teeth, ... — merged where one band's motion explains another's, and the largest band, the head, cut into depth
+slices, since a turning head moves its nose and its cheeks differently on screen), and per band and frame the
+2D affine map that best explains the projected motion is fitted (robust least squares from the neutral frame).
+It is written as an SMIL transform stack on a ``<g>``:
+
+    translate(tx ty) rotate(a) skewX(k) scale(sx sy)     each an <animateTransform additive="sum">
+
+which is exactly the QR decomposition of the affine map (rotation times upper-triangular), about the band's
+centroid (path coordinates are relative to it). Each parameter is keyframed on its own with
+``keyframes.reduce`` and rounded; SMIL interpolates the parameters linearly, so the *played* transform
+between keys is not the fitted one.
+
+Why the bound still holds: the residual each path encodes is measured against the played transform, not the
+fitted one: local = M_played(t)^-1 (exact(t)). Whatever the transform keyframing and rounding leave out
+becomes residual motion, which the error-bounded encoder keeps within a local radius r_local. The composed
+error is |L(t) (local_played - local_exact)| <= sigma_max(L(t)) r_local, so choosing
+r_local = r_global / max_t sigma_max(L(t)) keeps the final composed position within the global radius.
+
+Painter's order: triangles are drawn back to front across bands (the eyes sit between the skin of the socket
+and the eyelids), so one <g> per band would break the order. Paths are grouped in *runs* of consecutive
+same-band paths, each run its own <g> with (a copy of) the band's transform animation. ``reorder`` first moves
+paths past each other where that cannot change a pixel (their boxes never meet in a frame where both are
+drawn), greedily continuing the current band, which merges many runs; ``plan`` then wraps only the runs whose
+saved keys outweigh the text of their transform stack, and leaves the others plain.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from typing import NamedTuple
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse.csgraph import connected_components
+
+from converter import keyframes
+
+SKIN_DEPTH_BANDS = 3  # depth slices of the largest band (the head)
+MIN_BAND_TRIANGLES = 12  # smaller connected pieces join their part's largest piece
+SMALL_BAND_TRIANGLES, SMALL_BAND_SHARE = 100, 0.02  # pieces below max(these) never get a band of their own
+MERGE_PX = 1.5  # a piece whose motion a larger band explains this well (px, 95th percentile) joins it
+OVERLAP_BLOCK = 8  # frames per block of the bounding-box overlap search
+STROKE_MARGIN_PX = 0.5  # two paths closer than this may share stroke pixels: their order is kept
+TRANSFORM_SHARE = 0.1  # px the transform keyframing may leave to the residual, as a share of the tolerance
+HUBER_PX = 1.0  # scale of the robust (Cauchy) weights in the affine fit
+FIT_ITERATIONS = 3
+EVERY_FRAME_SHARE = 0.8  # when keyframing keeps more frames than this share, write every frame (no keyTimes)
+BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime)
+
+
+class TransformAnim(NamedTuple):
+    """One <animateTransform>: its type, key frames (0..T), rounded values (K, d) and their decimals."""
+
+    kind: str
+    frames: np.ndarray  # int (K,) frames of the keys, 0..T (T = loop end)
+    values: np.ndarray  # float64 (K, d) as written (translate in viewBox units), rounded to `decimals`
+    decimals: int
+
+
+class BandMotion(NamedTuple):
+    """The played transform of one band: its animations and the matrices they give at every frame."""
+
+    centroid: np.ndarray  # (2,) px, the origin of the band's local coordinates
+    anims: tuple[TransformAnim, ...]
+    matrices: np.ndarray  # float64 (T, 2, 3) local px -> viewport px, as the browser plays it at frame times
+    gain: float  # max over frames of the largest singular value of the linear part (local -> global error)
+
+
+class Layout(NamedTuple):
+    """Paths regrouped for rigid factoring: draw order, band per path, runs, local tracks and their gains."""
+
+    order: np.ndarray  # int (P,) permutation of the input paths (document order after reordering)
+    band: np.ndarray  # int (P,) band of each path, in the new order
+    runs: np.ndarray  # int (R + 1,) start of each run of same-band paths, then P
+    motions: tuple[BandMotion, ...]  # per band
+    local: np.ndarray  # float64 (T, P, 6) path vertices in their band's local px (relative to the centroid)
+    gain: np.ndarray  # float64 (P,) error gain of each path's band
+
+
+class Plan(NamedTuple):
+    """What the bounded encoder needs to write paths under rigid groups (see ``plan``)."""
+
+    order: np.ndarray  # int (P,) new document order of the input paths
+    track: np.ndarray  # float64 (T, P, 6) px to encode per path: local (in a group) or global (plain)
+    radius: np.ndarray  # float64 (P,) Euclidean px the keyframing of each path may use
+    speed: np.ndarray  # float64 (P,) fastest composed px/frame of each path (for keyTimes rounding)
+    opens: dict[int, str]  # path index (new order) -> '<g>' + transform stack written before it
+    closes: frozenset[int]  # path indices (new order) after which a '</g>' closes the run
+    band: np.ndarray  # int (P,) band of each path in the new order, -1 when plain (no group)
+    gain: np.ndarray  # float64 (P,) local -> global error gain of each path (1 when plain)
+    motions: tuple[BandMotion, ...]  # per band: the played transform
+    stats: dict[str, float]
+
+
+# --- bands ---------------------------------------------------------------------------------------------------
+def components(faces: np.ndarray, part_ids: np.ndarray) -> np.ndarray:
+    """Piece id (F,) per triangle: connected pieces of each part (tiny pieces join their part's largest)."""
+    f = len(faces)
+    n_v = int(faces.max()) + 1
+    label = np.zeros(f, np.int64)
+    # Triangles sharing a vertex within the same part are connected: a graph on (triangle, vertex) incidences.
+    inc = sparse.csr_matrix((np.ones(3 * f), (np.repeat(np.arange(f), 3), faces.reshape(-1))), shape=(f, n_v))
+    part_sizes = np.bincount(part_ids)
+    next_label = 0
+    for p in np.flatnonzero(part_sizes).tolist():
+        sel = np.flatnonzero(part_ids == p)
+        sub = inc[sel]
+        _, comp = connected_components(sub @ sub.T, directed=False)
+        sizes = np.bincount(comp)
+        comp = np.where(sizes[comp] < MIN_BAND_TRIANGLES, int(np.argmax(sizes)), comp)
+        _, comp = np.unique(comp, return_inverse=True)
+        label[sel] = next_label + comp
+        next_label += int(comp.max()) + 1
+    return label
+
+
+def merge_by_motion(piece: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutral: int,
+                    threshold: float, small: int) -> np.ndarray:
+    """Band id (F,) per triangle: pieces whose motion a larger band's affine fit explains join that band.
+
+    Pieces are taken largest first. A piece joins the band whose fitted maps move the piece's own vertices
+    closest to where they are (95th percentile over frames and vertices) when that is within `threshold` px,
+    or in any case when it has fewer than `small` triangles (a band of its own would cost more than it saves).
+    Lashes ride on the skin and upper teeth on the head, while the eyeballs, which rotate in their sockets,
+    keep their own bands."""
+    ids, sizes = np.unique(piece, return_counts=True)
+    bands: list[tuple[int, np.ndarray, np.ndarray]] = []  # (band label, its fit (T, 2, 3), its centre)
+    out = piece.copy()
+    rank = np.argsort(-sizes, kind="stable")
+    for pid, size in zip(ids[rank].tolist(), sizes[rank].tolist()):
+        verts = np.unique(faces[piece == pid])
+        ref = xy[neutral, verts]
+        errors = []
+        for _, fit, centre in bands:
+            pred = np.einsum("tij,nj->tni", fit[:, :, :2], ref - centre) + fit[:, None, :, 2]
+            errors.append(np.percentile(np.linalg.norm(pred - xy[:, verts], axis=-1), 95))
+        if errors and (min(errors) <= threshold or size < small):
+            out[piece == pid] = bands[int(np.argmin(errors))][0]
+            continue
+        centre = ref.mean(axis=0)
+        bands.append((pid, fit_affine(ref - centre, xy[:, verts]), centre))
+    return out
+
+
+def depth_slices(band: np.ndarray, depth: np.ndarray, slices: int) -> np.ndarray:
+    """Band id (F,) with the largest band cut into `slices` depth quantiles (per-triangle neutral depth)."""
+    ids, sizes = np.unique(band, return_counts=True)
+    big = ids[np.argmax(sizes)]
+    sel = np.flatnonzero(band == big)
+    out = band * (slices + 1)  # room for the slice ids
+    if slices > 1:
+        edges = np.quantile(depth[sel], np.linspace(0, 1, slices + 1)[1:-1])
+        out[sel] += np.searchsorted(edges, depth[sel])
+    return out
+
+
+# --- affine fits and the transform stack -----------------------------------------------------------------------
+def fit_affine(ref: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Per frame the 2x3 affine map (T, 2, 3) taking ref (n, 2) closest to xy (T, n, 2), robust to local motion."""
+    t, n = xy.shape[:2]
+    if n < 3 or np.linalg.matrix_rank(ref - ref.mean(0), tol=1e-6) < 2:
+        out = np.zeros((t, 2, 3))
+        out[:, 0, 0] = out[:, 1, 1] = 1.0
+        out[:, :, 2] = xy.mean(axis=1) - ref.mean(axis=0)
+        return out
+    d = np.c_[ref, np.ones(n)]  # (n, 3)
+    w = np.ones((t, n))
+    for _ in range(FIT_ITERATIONS):
+        m = np.einsum("tn,ni,nj->tij", w, d, d)  # weighted normal equations per frame
+        b = np.einsum("tn,ni,tnc->tic", w, d, xy)
+        sol = np.linalg.solve(m + 1e-9 * np.eye(3), b)  # (T, 3, 2)
+        r = np.linalg.norm(np.einsum("ni,tic->tnc", d, sol) - xy, axis=-1)
+        w = 1.0 / (1.0 + (r / HUBER_PX) ** 2)  # Cauchy weights: moving lips and jaw barely pull the fit
+    return np.swapaxes(sol, 1, 2)
+
+
+def decompose(a: np.ndarray, center: np.ndarray) -> np.ndarray:
+    """(T, 2, 3) affine maps -> (T, 6) parameters tx ty (image of center) angle skew (degrees) sx sy."""
+    lin = a[:, :, :2]
+    theta = np.unwrap(np.arctan2(lin[:, 1, 0], lin[:, 0, 0]))
+    c, s = np.cos(theta), np.sin(theta)
+    sx = np.hypot(lin[:, 0, 0], lin[:, 1, 0])
+    u01 = c * lin[:, 0, 1] + s * lin[:, 1, 1]  # R^T L = [[sx, sy tan k], [0, sy]]
+    sy = -s * lin[:, 0, 1] + c * lin[:, 1, 1]
+    safe = np.abs(sy) > 1e-9
+    skew = np.where(safe, np.arctan(u01 / np.where(safe, sy, 1.0)), np.arctan2(u01, sy))
+    trans = np.einsum("tij,j->ti", lin, center) + a[:, :, 2]
+    return np.column_stack([trans, np.degrees(theta), np.degrees(skew), sx, sy])
+
+
+def compose(params: np.ndarray, center: np.ndarray) -> np.ndarray:
+    """(T, 6) parameters -> (T, 2, 3) maps translate . rotate . skewX . scale, taking points relative to center."""
+    theta, skew = np.radians(params[:, 2]), np.radians(params[:, 3])
+    c, s = np.cos(theta), np.sin(theta)
+    sx, sy = params[:, 4], params[:, 5]
+    u = np.zeros((len(params), 2, 2))
+    u[:, 0, 0], u[:, 0, 1], u[:, 1, 1] = sx, sy * np.tan(skew), sy
+    rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], 1)
+    out = np.zeros((len(params), 2, 3))
+    out[:, :, :2] = rot @ u
+    out[:, :, 2] = params[:, :2] - np.einsum("tij,j->ti", out[:, :, :2], center)
+    return out
+
+
+def _decimals(step: float) -> int:
+    """Fewest decimals whose rounding (half a unit) stays within step."""
+    return int(np.clip(math.ceil(-math.log10(max(2 * step, 1e-12))), 0, 8))
+
+
+def band_motion(params: np.ndarray, center: np.ndarray, radius: float, budget: float, scale: int,
+                kt_decimals: int) -> BandMotion:
+    """Keyframed, rounded transform stack for fitted parameters (T, 6) about center; radius: band extent px."""
+    t = len(params)
+    radius = max(radius, 1.0)
+    # Per-parameter bound so each moves a point of the band by at most budget / 4 px.
+    per = budget / 4
+    eps = np.array([per, per, math.degrees(per / radius), math.degrees(per / radius), per / radius, per / radius])
+    # Rounding of the written values: small against the slack so the residual does not pick up rounding noise.
+    r = budget / 4
+    rounding = {"translate": r, "rotate": math.degrees(r / radius), "skewX": math.degrees(r / radius),
+                "scale": r / radius}
+    identity = np.array([0, 0, 0, 0, 1, 1.0])
+    groups = {"translate": [0, 1], "rotate": [2], "skewX": [3], "scale": [4, 5]}
+    anims = []
+    played = np.tile(identity, (t, 1))
+    frames_t = np.arange(t)
+    q = 10 ** kt_decimals
+    for kind, cols in groups.items():
+        x = params[:, cols]
+        if kind != "translate" and np.abs(x - identity[cols]).max() <= eps[cols[0]]:
+            continue  # the identity explains it: no animation
+        keys = keyframes.reduce((x / eps[cols])[:, None, :], np.ones((t, 1), bool), 1.0)
+        kf = np.flatnonzero(keys.mask[:, 0])
+        unit = scale if kind == "translate" else 1.0  # translate is written in viewBox units
+        dec = _decimals(rounding[kind] * unit)
+        if len(kf) > EVERY_FRAME_SHARE * (t + 1):  # jitter keeps nearly every frame: all, without keyTimes
+            kf = np.arange(t + 1)
+            vals = np.round(np.vstack([x, x[-1:]]) * unit, dec)
+        else:
+            vals = np.round(keys.values[kf, 0] * eps[cols] * unit, dec)
+        if len(kf) == 2 and np.array_equal(vals[0], vals[1]):  # constant: one value plays as a set
+            kf, vals = kf[:1], vals[:1]
+        kt = kf / t if len(kf) == t + 1 else np.rint(kf * q / t) / q  # every frame: no keyTimes written
+        for c, col in enumerate(cols):
+            played[:, col] = (np.interp(frames_t / t, kt, vals[:, c]) if len(kf) > 1 else vals[0, c]) / unit
+        anims.append(TransformAnim(kind, kf, vals, dec))
+    mats = compose(played, np.zeros(2))
+    gain = float(np.linalg.svd(mats[:, :, :2], compute_uv=False).max()) if t else 1.0
+    return BandMotion(np.asarray(center, np.float64), tuple(anims), mats, gain)
+
+
+def local_tracks(xy_paths: np.ndarray, mats: np.ndarray) -> np.ndarray:
+    """Path vertices (T, P, 3, 2) px -> local px of one band's played transforms mats (T, 2, 3)."""
+    lin_inv = np.linalg.inv(mats[:, :, :2])
+    return np.einsum("tij,tpvj->tpvi", lin_inv, xy_paths - mats[:, None, None, :, 2])
+
+
+# --- drawing order ----------------------------------------------------------------------------------------------
+def _cell_pairs(lo: np.ndarray, hi: np.ndarray, cell: float) -> np.ndarray:
+    """(M, 2) index pairs of boxes [lo, hi] (N, 2) that share a grid cell of side cell (duplicates possible)."""
+    c0 = np.floor(lo / cell).astype(np.int64)
+    span = np.floor(hi / cell).astype(np.int64) - c0 + 1
+    n_cells = span[:, 0] * span[:, 1]
+    owner = np.repeat(np.arange(len(lo)), n_cells)
+    local = np.arange(int(n_cells.sum())) - np.repeat(np.cumsum(n_cells) - n_cells, n_cells)
+    sx = np.repeat(span[:, 0], n_cells)
+    cx = np.repeat(c0[:, 0], n_cells) + local % sx
+    cy = np.repeat(c0[:, 1], n_cells) + local // sx
+    key = (cx - cx.min()) * (int(cy.max() - cy.min()) + 1) + (cy - cy.min())
+    order = np.lexsort((owner, key))
+    key, owner = key[order], owner[order]
+    out = []
+    for d in range(1, len(key)):
+        same = np.flatnonzero(key[d:] == key[:-d])
+        if not len(same):
+            break
+        out.append(np.stack([owner[same], owner[same + d]], axis=1))
+    return np.concatenate(out) if out else np.zeros((0, 2), np.int64)
+
+
+def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP_BLOCK,
+                  margin: float = STROKE_MARGIN_PX, band: np.ndarray | None = None) -> np.ndarray:
+    """(E, 2) path pairs i < j that may come within margin px of each other in a frame where both are drawn.
+
+    Conservative: per block of frames, each path's bounding box over the block's frames where it is drawn,
+    grown by margin / 2 (the stroke paints half its width beyond the edge); pairs whose boxes intersect in
+    some block, found through a uniform grid. (An exact per-frame separating-axis test cut the runs on the
+    capture-like face from 570 to 262 but took ten times as long.) With band (P,), only pairs of different
+    bands are returned (``reorder`` keeps each band's own order anyway)."""
+    t, p = active.shape
+    found = []
+    for k0 in range(0, t, block):
+        act = active[k0:k0 + block]
+        idx = np.flatnonzero(act.any(axis=0))
+        if len(idx) < 2:
+            continue
+        pts = xy_paths[k0:k0 + block, idx]  # (B, n, 3, 2)
+        on = act[:, idx][:, :, None, None]
+        lo = np.where(on, pts, np.inf).min(axis=(0, 2)) - margin / 2
+        hi = np.where(on, pts, -np.inf).max(axis=(0, 2)) + margin / 2
+        cell = max(2.0 * float(np.median((hi - lo).max(axis=1))), 1.0)
+        pairs = _cell_pairs(lo, hi, cell)
+        a, b = pairs[:, 0], pairs[:, 1]
+        hit = (np.maximum(lo[a], lo[b]) <= np.minimum(hi[a], hi[b])).all(axis=1)
+        a, b = idx[a[hit]], idx[b[hit]]
+        if band is not None:
+            a, b = a[band[a] != band[b]], b[band[a] != band[b]]
+        found.append(np.minimum(a, b) * p + np.maximum(a, b))
+    if not found:
+        return np.zeros((0, 2), np.int64)
+    code = np.unique(np.concatenate(found))
+    return np.column_stack([code // p, code % p])
+
+
+def reorder(band: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """A draw order (permutation) keeping every pair's order and each band's own order, continuing the current
+    band greedily (switching to the band whose next path comes earliest)."""
+    p = len(band)
+    # Each band's paths stay in their order: chain each to the next path of its band.
+    by_band = np.lexsort((np.arange(p), band))
+    same = band[by_band[1:]] == band[by_band[:-1]]
+    chain = np.column_stack([by_band[:-1][same], by_band[1:][same]])
+    code = np.unique(np.concatenate([np.asarray(pairs, np.int64).reshape(-1, 2), chain]) @ np.array([p, 1]))
+    pairs = np.column_stack([code // p, code % p])
+    succ = sparse.csr_matrix((np.ones(len(pairs), bool), (pairs[:, 0], pairs[:, 1])), shape=(p, p))
+    indeg = np.bincount(pairs[:, 1], minlength=p) if len(pairs) else np.zeros(p, np.int64)
+    heaps: dict[int, list[int]] = {}
+    for i in np.flatnonzero(indeg == 0).tolist():
+        heaps.setdefault(int(band[i]), []).append(i)
+    for h in heaps.values():
+        heapq.heapify(h)
+    order: list[int] = []
+    cur = -1
+    indptr, indices = succ.indptr, succ.indices
+    bl = band.tolist()
+    while len(order) < p:
+        if not heaps.get(cur):
+            cur = min((h[0], b) for b, h in heaps.items() if h)[1]  # the band whose next path is earliest
+        i = heapq.heappop(heaps[cur])
+        order.append(i)
+        for j in indices[indptr[i]:indptr[i + 1]].tolist():
+            indeg[j] -= 1
+            if indeg[j] == 0:
+                heapq.heappush(heaps.setdefault(bl[j], []), j)
+    return np.array(order, np.int64)
+
+
+# --- layout and plan --------------------------------------------------------------------------------------------
+def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, depth: np.ndarray, neutral: int,
+           tris: np.ndarray, active: np.ndarray, tolerance: float, scale: int, kt_decimals: int = 4,
+           skin_bands: int = SKIN_DEPTH_BANDS, merge_runs: bool = True) -> Layout:
+    """Bands, played transforms, run order and local tracks for paths tris (P,) shown where active (T, P).
+
+    xy (T, V, 2) px and depth (T, V) come from the Sheet; tolerance px is the global bound the residual
+    encoder works to (the transforms take TRANSFORM_SHARE of it as fitting slack, not as error)."""
+    t = xy.shape[0]
+    xy64 = xy.astype(np.float64)
+    tri_depth = depth[neutral][faces].mean(axis=1)
+    small = max(SMALL_BAND_TRIANGLES, int(SMALL_BAND_SHARE * len(faces)))
+    merged = merge_by_motion(components(faces, part_ids), faces, xy64, neutral, MERGE_PX, small)
+    band_of_tri = depth_slices(merged, tri_depth, skin_bands)
+    band_ids, band = np.unique(band_of_tri[tris], return_inverse=True)
+    motions = []
+    for b in band_ids.tolist():
+        verts = np.unique(faces[band_of_tri == b])
+        ref = xy64[neutral, verts]
+        center = ref.mean(axis=0)
+        radius = float(np.linalg.norm(ref - center, axis=1).max()) if len(verts) else 1.0
+        a = fit_affine(ref - center, xy64[:, verts])
+        params = decompose(a, np.zeros(2))
+        motions.append(band_motion(params, center, radius, TRANSFORM_SHARE * tolerance, scale, kt_decimals))
+    path_xy = xy64[:, faces[tris]]  # (T, P, 3, 2)
+    order = np.arange(len(tris))
+    if merge_runs and len(tris) > 1:
+        order = reorder(band, overlap_pairs(path_xy, active, band=band))
+    band = band[order]
+    path_xy = path_xy[:, order]
+    local = np.zeros((t, len(tris), 3, 2))
+    for b, m in enumerate(motions):
+        sel = np.flatnonzero(band == b)
+        local[:, sel] = local_tracks(path_xy[:, sel], m.matrices)
+    local = local.reshape(t, len(tris), 6)
+    change = np.flatnonzero(np.diff(band)) + 1
+    runs = np.concatenate([[0], change, [len(tris)]]).astype(np.int64)
+    gains = np.array([m.gain for m in motions])[band]
+    return Layout(order, band, runs, tuple(motions), local, gains)
+
+
+def _num(x: float, decimals: int) -> str:
+    s = f"{x:.{decimals}f}"
+    if "." in s:
+        s = s.rstrip("0").rstrip(".")
+    if s.startswith("0."):
+        s = s[1:]
+    elif s.startswith("-0."):
+        s = "-" + s[2:]
+    return "0" if s in ("-0", "", "-") else s
+
+
+def group_open(motion: BandMotion, n_frames: int, dur: str, kt_decimals: int = 4) -> str:
+    """'<g>' plus the band's animateTransform stack (additive sum, in document order) for one run."""
+    out = ["<g>"]
+    q = 10 ** kt_decimals
+    for a in motion.anims:
+        vals = ";".join(" ".join(_num(v, a.decimals) for v in row) for row in a.values.tolist())
+        head = f'<animateTransform attributeName="transform" type="{a.kind}" additive="sum" dur="{dur}" '
+        if len(a.frames) == 1 or len(a.frames) == n_frames + 1:  # a set, or evenly spaced: no keyTimes
+            out.append(f'{head}repeatCount="indefinite" values="{vals}"/>')
+            continue
+        kt = ";".join(_num(u / q, kt_decimals) for u in np.rint(a.frames * q / n_frames).astype(np.int64).tolist())
+        out.append(f'{head}repeatCount="indefinite" keyTimes="{kt}" values="{vals}"/>')
+    return "".join(out)
+
+
+def local_radius(tolerance: float, gain: np.ndarray, scale: int, time_budget: float, float_err: float) -> np.ndarray:
+    """Per path the Euclidean px the local keyframing may use so the composed error stays within tolerance.
+
+    Local coordinates are rounded to the 1/scale grid (at most sqrt(1/2)/scale local px), then mapped by the
+    played linear part (gain >= sigma_max): gain * (radius + rounding) + time_budget + float_err <= tolerance."""
+    g = np.maximum(np.asarray(gain, np.float64), 1e-9)
+    return (tolerance - time_budget - float_err) / g - math.sqrt(0.5) / scale
+
+
+def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, depth: np.ndarray, neutral: int,
+         tris: np.ndarray, active: np.ndarray, track: np.ndarray, tolerance: float, scale: int,
+         time_budget: float, float_err: float, global_radius: float, dur: str,
+         skin_bands: int = SKIN_DEPTH_BANDS, merge_runs: bool = True, bend: bool = False) -> Plan:
+    """Rigid layout for the bounded encoder: which runs of paths go under a group transform, and their tracks.
+
+    A run is wrapped only when the keys it saves (local against global keyframe counts, at BYTES_PER_KEY)
+    outweigh the text of its transform stack; other paths stay plain (global coordinates, no group)."""
+    t, p = active.shape
+    lay = layout(xy, faces, part_ids, depth, neutral, tris, active, tolerance, scale, skin_bands=skin_bands,
+                 merge_runs=merge_runs)
+    act = active[:, lay.order]
+    glob = track[:, lay.order]
+    r_local = local_radius(tolerance, lay.gain, scale, time_budget, float_err)
+    ok = r_local > 0.05 * global_radius  # a band that magnifies errors too much is not worth it
+    kg = keyframes.reduce(keyframes.octagon_tracks(glob), act, global_radius * keyframes.OCTAGON, bend=bend)
+    kl = keyframes.reduce(keyframes.octagon_tracks(lay.local), act, np.maximum(r_local, 1e-6) * keyframes.OCTAGON,
+                          bend=bend)
+    saved = (kg.mask.sum(axis=0) - kl.mask.sum(axis=0)) * BYTES_PER_KEY
+    opens: dict[int, str] = {}
+    closes = set()
+    wrapped = np.zeros(p, bool)
+    texts = [group_open(m, t, dur) for m in lay.motions]
+    for a, b in zip(lay.runs[:-1].tolist(), lay.runs[1:].tolist()):
+        band = int(lay.band[a])
+        if ok[a] and saved[a:b].sum() > len(texts[band]) + 4:
+            opens[a] = texts[band]
+            closes.add(b - 1)
+            wrapped[a:b] = True
+    out_track = np.where(wrapped[None, :, None], lay.local, glob)
+    radius = np.where(wrapped, r_local, global_radius)
+    if t > 1:
+        step = np.linalg.norm(np.diff(out_track.reshape(t, p, 3, 2), axis=0), axis=-1).max(axis=(0, 2))
+    else:
+        step = np.zeros(p)
+    speed = np.where(wrapped, step * lay.gain, step)
+    stats = {"bands": len(lay.motions), "runs": len(lay.runs) - 1, "groups": len(opens),
+             "grouped_paths": int(wrapped.sum()), "transform_bytes": sum(len(texts[int(lay.band[a])]) for a in opens),
+             "keys_global": int(kg.mask.sum()),
+             "keys_rigid": int(np.where(wrapped, kl.mask.sum(0), kg.mask.sum(0)).sum()),
+             "max_gain": float(lay.gain.max()) if p else 1.0}
+    band = np.where(wrapped, lay.band, -1)
+    gain = np.where(wrapped, lay.gain, 1.0)
+    return Plan(lay.order, out_track, radius, speed, opens, frozenset(closes), band, gain, lay.motions, stats)
+
+
+def compose_tracks(plan_: Plan, local: np.ndarray) -> np.ndarray:
+    """Paths' coordinates (T, P, 6) in their own frames (local in groups) -> viewport px, as played."""
+    out = np.array(local, np.float64, copy=True)
+    t = out.shape[0]
+    for b, m in enumerate(plan_.motions):
+        sel = np.flatnonzero(plan_.band == b)
+        pts = out[:, sel].reshape(t, len(sel), 3, 2)
+        out[:, sel] = (np.einsum("tij,tpvj->tpvi", m.matrices[:, :, :2], pts)
+                       + m.matrices[:, None, None, :, 2]).reshape(t, len(sel), 6)
+    return out
+
+
+def plan_for(sheet, options, tris: np.ndarray, active: np.ndarray, track: np.ndarray, dur: str) -> Plan:
+    """``plan`` with the bounded SVG encoder's budgets (converter.writers.svg_anim) for these options."""
+    from converter.writers import svg_anim
+
+    tol = options.tolerance
+    scale = svg_anim.viewbox_scale(tol)
+    time_budget = svg_anim.TIME_SHARE * tol
+    float_err = 1e-4 + 2e-7 * max(sheet.camera.width, sheet.camera.height)  # as svg_anim._encode_keyed
+    radius = tol - math.sqrt(0.5) / scale - time_budget - float_err
+    return plan(sheet.xy, sheet.faces, sheet.part_ids, sheet.depth, sheet.neutral, tris, active, track, tol, scale,
+                time_budget, float_err, radius, dur, bend=True)
