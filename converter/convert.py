@@ -14,6 +14,7 @@ from typing import Callable
 from converter import extract as extraction
 from converter import formats
 from converter.animation import FaceAnimation
+from converter.errors import InputError
 from converter.options import ConversionOptions, Progress, Report, no_progress
 
 
@@ -79,12 +80,17 @@ def convert_animation(
         from converter.writers import fap2d
 
         return fap2d.convert(anim, options, report, progress)
+    if options.frame is not None and not 0 <= options.frame < anim.n_frames:
+        raise InputError(f"--frame {options.frame} is outside 0..{anim.n_frames - 1}; choose a frame inside it.")
     t = time.perf_counter()
     camera = extraction.fit_camera(anim, options.size, options.yaw, options.pitch, options.fov, options.ortho)
     sheet = extraction.extract(
         anim, camera, neutral=options.neutral_frame, occlusion=options.occlusion,
         progress=lambda s, f: progress(s, 0.1 + 0.5 * f),
     )
+    if not sheet.kept.any():
+        raise InputError("no triangle is ever visible from this camera (all face away or lie outside the view); "
+                         "check --yaw/--pitch or the mesh's winding.")
     sheet.info["source_sha256"] = source_sha256
     sheet.info["source_frames"] = [options.start, options.start + anim.n_frames]
     report.timings["extract"] = time.perf_counter() - t

@@ -81,3 +81,26 @@ def test_bad_options_are_clear_errors(sample_path, args, needle):
 def test_missing_input_file(tmp_path):
     r = run("convert", tmp_path / "nope.glb")
     assert r.returncode == 2 and "does not exist" in r.stderr
+
+
+def test_face_never_visible_is_a_clear_error():
+    import numpy as np
+
+    from converter.animation import FaceAnimation, Part
+    from converter.convert import convert_animation
+    from converter.errors import InputError
+    from converter.options import ConversionOptions
+
+    frames = np.array([[[0, 0, 0], [0, 1, 0], [1, 0, 0]]] * 3, np.float32)  # clockwise from the front: a back face
+    anim = FaceAnimation(frames, np.array([[0, 1, 2]]), np.zeros(1, np.int32), (Part("skin", (1, 1, 1)),), 10.0)
+    for opts in (ConversionOptions(size=64), ConversionOptions(size=64, shading="gouraud", frame=0)):
+        with pytest.raises(InputError, match="no triangle is ever visible"):
+            convert_animation(anim, opts)
+    # Seen from behind (yaw 180) the same triangle faces the camera and converts.
+    assert convert_animation(anim, ConversionOptions(size=64, yaw=180)).data.startswith(b"<svg")
+
+
+def test_still_frame_outside_the_animation(sample_path, tmp_path):
+    out = tmp_path / "x.svg"
+    r = run("convert", sample_path, "--frame", "9999", "-o", out)
+    assert r.returncode == 2 and "--frame 9999" in r.stderr and not out.exists()
