@@ -39,6 +39,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 
 from converter import keyframes
+from converter.svgtext import number as svg_number
 
 SKIN_DEPTH_BANDS = 3  # depth slices of the largest band (the head)
 MIN_BAND_TRIANGLES = 12  # smaller connected pieces join their part's largest piece
@@ -391,15 +392,6 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, depth: np.nd
     return Layout(order, band, runs, tuple(motions), local, gains)
 
 
-def _num(x: float, decimals: int) -> str:
-    s = f"{x:.{decimals}f}"
-    if "." in s:
-        s = s.rstrip("0").rstrip(".")
-    if s.startswith("0."):
-        s = s[1:]
-    elif s.startswith("-0."):
-        s = "-" + s[2:]
-    return "0" if s in ("-0", "", "-") else s
 
 
 def group_open(motion: BandMotion, n_frames: int, dur: str, kt_decimals: int = 4) -> str:
@@ -407,12 +399,12 @@ def group_open(motion: BandMotion, n_frames: int, dur: str, kt_decimals: int = 4
     out = ["<g>"]
     q = 10 ** kt_decimals
     for a in motion.anims:
-        vals = ";".join(" ".join(_num(v, a.decimals) for v in row) for row in a.values.tolist())
+        vals = ";".join(" ".join(svg_number(v, a.decimals) for v in row) for row in a.values.tolist())
         head = f'<animateTransform attributeName="transform" type="{a.kind}" additive="sum" dur="{dur}" '
         if len(a.frames) == 1 or len(a.frames) == n_frames + 1:  # a set, or evenly spaced: no keyTimes
             out.append(f'{head}repeatCount="indefinite" values="{vals}"/>')
             continue
-        kt = ";".join(_num(u / q, kt_decimals) for u in np.rint(a.frames * q / n_frames).astype(np.int64).tolist())
+        kt = ";".join(svg_number(u / q, kt_decimals) for u in np.rint(a.frames * q / n_frames).astype(np.int64).tolist())
         out.append(f'{head}repeatCount="indefinite" keyTimes="{kt}" values="{vals}"/>')
     return "".join(out)
 

@@ -28,6 +28,7 @@ import numpy as np
 from converter import depth, keyframes
 from converter.options import ConversionOptions, Report
 from converter.sheet import Sheet
+from converter.svgtext import number as svg_number
 
 FORMAT_VERSION = 2
 STROKE_PX = 0.5  # stroke of the fill colour hides anti-aliasing seams between neighbours
@@ -48,11 +49,6 @@ def _hex(levels: np.ndarray) -> np.ndarray:
     return np.char.add("#", np.char.zfill(np.char.lower(np.char.mod("%x", code)), 6))
 
 
-def _num(x: float, decimals: int) -> str:
-    s = f"{x:.{decimals}f}".rstrip("0").rstrip(".")
-    if s.startswith("0."):
-        s = s[1:]
-    return "0" if s in ("-0", "") else s
 
 
 def viewbox_scale(tolerance: float) -> int:
@@ -68,7 +64,7 @@ def key_time_strings(n_frames: int, decimals: int, discrete: bool) -> list[str]:
     if discrete:
         k = np.maximum(k - 0.5, 0.0)
     units = np.rint(k * q / n_frames).astype(np.int64)
-    return [_num(u / q, decimals) for u in units.tolist()]
+    return [svg_number(u / q, decimals) for u in units.tolist()]
 
 
 def key_time_decimals(n_frames: int, speed: np.ndarray, tolerance: float, budget: float) -> np.ndarray:
@@ -126,7 +122,7 @@ def _header(sheet: Sheet, scale: int) -> str:
 
 def _style(palette: np.ndarray, scale: int) -> str:
     rules = "".join(f".c{i}{{color:{c}}}" for i, c in enumerate(_hex(palette).tolist()))
-    sw = _num(STROKE_PX * scale, 3)
+    sw = svg_number(STROKE_PX * scale, 3)
     return (f"<style>path{{fill:currentColor;stroke:currentColor;stroke-width:{sw};stroke-linejoin:round}}"
             f".{HIDDEN_CLASS}{{visibility:hidden}}{rules}</style>")
 
@@ -212,7 +208,9 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     extra: dict = {"encoding": {"mode": mode}}
     plan = None
     if mode == "bounded" and options.rigid and p:
-        from converter import rigid  # rigid 2D motion factored into animated group transforms
+        from converter import (
+            rigid,  # rigid 2D motion factored into animated group transforms
+        )
 
         plan = rigid.plan_for(sheet, options, tris, active, track, dur)
         if plan.opens:  # else nothing pays for a group: the plain encoding, byte for byte

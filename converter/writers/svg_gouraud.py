@@ -17,6 +17,7 @@ from converter.errors import InputError
 from converter.extract import painter_order
 from converter.options import ConversionOptions, Report
 from converter.sheet import Sheet
+from converter.svgtext import number as svg_number
 from converter.writers import svg_anim
 from converter.writers.gradients import exact_gradients, vertex_ramps
 
@@ -43,9 +44,6 @@ CHAPTER_FILTER = (
 )
 
 
-def _num(x: float, decimals: int) -> str:
-    s = f"{x:.{decimals}f}".rstrip("0").rstrip(".")
-    return "0" if s in ("-0", "") else s
 
 
 def _key_times(frames: np.ndarray, n_frames: int, floor: bool) -> str:
@@ -53,7 +51,7 @@ def _key_times(frames: np.ndarray, n_frames: int, floor: bool) -> str:
     decimals = len(str(n_frames)) + 2
     q = 10**decimals
     units = (frames * q) // n_frames if floor else np.rint(frames * q / n_frames).astype(np.int64)
-    return ";".join(_num(u / q, decimals) for u in units.tolist())
+    return ";".join(svg_number(u / q, decimals) for u in units.tolist())
 
 
 class _Track:
@@ -314,7 +312,7 @@ def _chapter_triangle(e: _Emit, f: int, vis: tuple[str, str], stroked: bool) -> 
         "path", f'id="q{f}" {d} fill="url(#b{f})"', d_anim
     )
     out.append(f"<defs>{copies}</defs>")
-    out.append(CHAPTER_FILTER.format(f=f, gain=_num(CHAPTER_ALPHA_GAIN, 4)))
+    out.append(CHAPTER_FILTER.format(f=f, gain=svg_number(CHAPTER_ALPHA_GAIN, 4)))
     out.append(_element("path", f'{d} fill="url(#c{f})" filter="url(#x{f})"{vis[0]}', d_anim + vis[1]))
     return "".join(out)
 
@@ -341,7 +339,7 @@ def write(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
     if still and not (0 <= options.frame < t_all):
         raise InputError(f"frame {options.frame} is outside 0..{t_all - 1}; choose --frame inside the range.")
     w, h = sheet.camera.width, sheet.camera.height
-    dur = f"{_num(sheet.duration, 6)}s"
+    dur = f"{svg_number(sheet.duration, 6)}s"
     if still:
         k = int(options.frame)
         cand = sheet.order[sheet.visible[k, sheet.order]]
