@@ -51,6 +51,6 @@ def _load(path: Path, fps: float | None, cache: str | Path | None) -> FaceAnimat
         return objseq.load_zip(data, fps=fps, name=name)
     from converter.formats import pointcache
 
-    if cache is None:
-        raise InputError(f"{path.name} is a single OBJ mesh; give its animation with --cache FILE.pc2|.mdd.")
+    if cache is None:  # a mesh on its own: one frame (animate it with --cache FILE.pc2|.mdd)
+        return pointcache.load_obj_static(data, fps=fps, name=name)
     return pointcache.load_obj_cache(data, read_bytes(cache, "point cache"), fps=fps, name=name)

@@ -37,6 +37,14 @@ AXIS_MAPS = {
 }
 
 
+def load_obj_static(obj_bytes: bytes, fps: float | None = None, name: str = "face") -> FaceAnimation:
+    """An OBJ mesh on its own: a one-frame animation (a face to clone onto, to drive by FAPs, or a still)."""
+    rest, faces, groups_of_face, groups = parse_obj(obj_bytes.decode("utf-8", errors="replace"), f"{name}.obj")
+    parts, part_ids = parts_for_groups(groups, groups_of_face)
+    return FaceAnimation(rest[None], faces, part_ids, parts, float(fps) if fps else DEFAULT_FPS, name,
+                         extras={"static": True})
+
+
 def load_obj_cache(obj_bytes: bytes, cache_bytes: bytes, fps: float | None = None, name: str = "face",
                    axes: str = "auto") -> FaceAnimation:
     """An OBJ rest mesh animated by a PC2 or MDD point cache, resampled at fps (default: the cache's rate)."""

@@ -9,23 +9,6 @@ from converter.errors import InputError
 from converter.userfiles import check_output
 
 
-def load_static_face(path: str | Path):
-    """A face mesh from any input facesvg reads, or a single OBJ (no point cache needed here)."""
-    from converter import formats
-
-    path = Path(path)
-    if path.suffix.lower() == ".obj" and path.is_file():
-        import numpy as np
-
-        from converter.animation import DEFAULT_PART_COLORS, FaceAnimation, Part
-        from converter.formats.obj import parse_obj
-
-        v, f, _, _ = parse_obj(path.read_text(errors="replace"), path.name)
-        return FaceAnimation(v[None], f, np.zeros(len(f), np.int32), (Part("skin", DEFAULT_PART_COLORS["skin"]),),
-                             30.0, path.stem)
-    return formats.load(path)
-
-
 def cmd_fdp(args: argparse.Namespace) -> int:
     """Propose an FDP for a face and write it as JSON."""
     from converter.convert import write_atomic
@@ -34,7 +17,9 @@ def cmd_fdp(args: argparse.Namespace) -> int:
 
     if not args.auto:
         raise InputError("only automatic proposals are supported; add --auto (then check and edit the JSON).")
-    face = load_static_face(args.input)
+    from converter import formats
+
+    face = formats.load(args.input)  # a single OBJ is a one-frame face
     fdp, report = auto_fdp(face)
     stem = Path(args.input).name.split(".")[0]
     out = Path(args.output) if args.output else Path(args.input).with_name(f"{stem}.fdp.json")

@@ -3,6 +3,7 @@
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 BIN = [sys.executable, "-m", "converter.cli"]
@@ -104,3 +105,32 @@ def test_still_frame_outside_the_animation(sample_path, tmp_path):
     out = tmp_path / "x.svg"
     r = run("convert", sample_path, "--frame", "9999", "-o", out)
     assert r.returncode == 2 and "--frame 9999" in r.stderr and not out.exists()
+
+
+def test_single_obj_is_a_still_face(tmp_path):
+    obj = tmp_path / "tri.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl skin\nf 1 2 3\n")
+    out = tmp_path / "tri.svg"
+    r = run("convert", obj, "-o", out, "--size", "64")
+    assert r.returncode == 0, r.stderr
+    assert "1 frames" in r.stdout and out.read_bytes().startswith(b"<svg")
+
+
+@pytest.mark.slow
+def test_convert_clones_onto_another_face(sample_path, shared_data, tmp_path):
+    """`convert --clone-target` runs the cloning stage: the SVG draws the target's triangles, animated."""
+    import json
+
+    from converter.verify import evaluate
+
+    target = shared_data / "mediapipe_canonical" / "canonical_face_model.obj"
+    out = tmp_path / "cloned.svg"
+    r = run("convert", sample_path, "-o", out, "--size", "128", "--end", "40", "--clone-target", target,
+            "--report", tmp_path / "r.json")
+    assert r.returncode == 0, r.stderr
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["counts"]["vertices"] == 468 and report["counts"]["frames"] == 40
+    ev = evaluate(out.read_bytes())
+    assert ev.triangles.max() < 898  # the target's triangles, not the sample's 2,998
+    moved = np.abs(ev.xy - ev.xy[:1]).max(axis=(2, 3))  # (T, P) px each path's vertices moved from frame 0
+    assert moved.max() > 2.0  # the clone moves with the source's expressions and head motion
