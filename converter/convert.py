@@ -107,9 +107,7 @@ def convert_animation(
     report.timings["write"] = time.perf_counter() - t
     report.sizes["output"] = len(data)
     progress("done", 1.0)
-    if options.svgz:
-        return Result(data, "image/svg+xml", ".svgz", report)
-    return Result(data, "image/svg+xml", ".svg", report)
+    return Result(data, "image/svg+xml", ".svgz" if options.svgz else ".svg", report)
 
 
 def convert(path: str | Path, options: ConversionOptions, progress: Progress = no_progress,

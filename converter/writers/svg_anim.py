@@ -208,9 +208,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     extra: dict = {"encoding": {"mode": mode}}
     plan = None
     if mode == "bounded" and options.rigid and p:
-        from converter import (
-            rigid,  # rigid 2D motion factored into animated group transforms
-        )
+        from converter import rigid  # rigid 2D motion factored into animated group transforms
 
         plan = rigid.plan_for(sheet, options, tris, active, track, dur)
         if plan.opens:  # else nothing pays for a group: the plain encoding, byte for byte
