@@ -94,14 +94,6 @@ def components(faces: np.ndarray, part_ids: np.ndarray, parts: tuple, n_vertices
     return out
 
 
-def rigid_vertices(faces: np.ndarray, part_ids: np.ndarray, parts: tuple, n_vertices: int) -> np.ndarray:
-    """Mask (V,) of vertices used only by rigid parts."""
-    rigid = np.array([p.name in RIGID_PARTS for p in parts] or [False])
-    used_soft = np.zeros(n_vertices, bool)
-    used_soft[faces[~rigid[part_ids]].ravel()] = True
-    used_rigid = np.zeros(n_vertices, bool)
-    used_rigid[faces[rigid[part_ids]].ravel()] = True
-    return used_rigid & ~used_soft
 
 
 def transfer_rigid(source_frames: np.ndarray, src_comp: np.ndarray, target_base: np.ndarray, tgt_comp: np.ndarray,

@@ -37,27 +37,6 @@ def ball_smooth(points: np.ndarray, values: np.ndarray, radius: float) -> np.nda
     return (m @ values) / np.asarray(m.sum(axis=1))
 
 
-def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
-    """Closed boundary loops (vertex ids in walking order) of a triangle mesh, sorted by first vertex."""
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    key = np.sort(e, axis=1)
-    _, inv, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    b = e[count[inv.ravel()] == 1]  # directed boundary edges keep the face winding
-    nxt: dict[int, int] = {}
-    for a, c in b.tolist():
-        nxt.setdefault(a, c)
-    loops, seen = [], set()
-    for start in sorted(nxt):
-        if start in seen:
-            continue
-        loop, v = [], start
-        while v not in seen and v in nxt:
-            seen.add(v)
-            loop.append(v)
-            v = nxt[v]
-        if v == start and len(loop) >= 3:
-            loops.append(np.array(loop, np.int64))
-    return loops
 
 
 def triangle_frames(verts: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
