@@ -67,6 +67,5 @@ def factor_pose(source: FaceAnimation, target: FaceAnimation):
 
 def soft_vertices(anim: FaceAnimation) -> np.ndarray:
     """Ids of the vertices of deformable parts (all used vertices when every part is rigid)."""
-    rigid_part = np.isin([p.name for p in anim.parts], rigid.RIGID_PARTS)
-    ids = np.unique(anim.faces[~rigid_part[anim.part_ids]])
+    ids = np.unique(rigid.soft_faces(anim))
     return ids if len(ids) else np.unique(anim.faces)

@@ -49,12 +49,6 @@ class DenseMap:
         return out
 
 
-def soft_faces(anim: FaceAnimation) -> np.ndarray:
-    """Triangles of the deformable parts (everything but eyeballs and teeth)."""
-    rigid_part = np.array([p.name in rigid.RIGID_PARTS for p in anim.parts] or [False])
-    return anim.faces[~rigid_part[anim.part_ids]]
-
-
 def skin_faces(anim: FaceAnimation) -> np.ndarray:
     """Triangles of the skin part when there is one, else the deformable triangles."""
     names = [p.name for p in anim.parts]
@@ -62,7 +56,7 @@ def skin_faces(anim: FaceAnimation) -> np.ndarray:
         f = anim.faces[anim.part_ids == names.index("skin")]
         if len(f):
             return f
-    return soft_faces(anim)
+    return rigid.soft_faces(anim)
 
 
 def smooth_normals(verts: np.ndarray, faces: np.ndarray, radius: float) -> np.ndarray:
@@ -174,7 +168,7 @@ def fit(source: FaceAnimation, target: FaceAnimation, correspondences: str | Non
     """Preprocess a source neutral (frame 0) against a target neutral (frame 0)."""
     s_base = source.frames[0].astype(np.float64)
     t_base = target.frames[0].astype(np.float64)
-    s_faces, t_faces = soft_faces(source), soft_faces(target)
+    s_faces, t_faces = rigid.soft_faces(source), rigid.soft_faces(target)
     if not len(s_faces) or not len(t_faces):
         raise InputError("dense cloning needs a deformable surface (not only eyes or teeth) on both faces.")
     size = np.ptp(s_base[np.unique(s_faces)], axis=0).max()

@@ -96,6 +96,12 @@ def components(faces: np.ndarray, part_ids: np.ndarray, parts: tuple, n_vertices
 
 
 
+def soft_faces(anim) -> np.ndarray:
+    """Triangles of the deformable parts (everything but eyeballs and teeth)."""
+    rigid_part = np.array([p.name in RIGID_PARTS for p in anim.parts] or [False])
+    return anim.faces[~rigid_part[anim.part_ids]]
+
+
 def transfer_rigid(source_frames: np.ndarray, src_comp: np.ndarray, target_base: np.ndarray, tgt_comp: np.ndarray,
                    scale: float) -> np.ndarray:
     """Frames (T, n, 3) of a target rigid piece that rotates like the source piece and moves `scale` as far."""
