@@ -7,7 +7,7 @@ projects every frame with the metadata camera and measures, for every vertex of 
 the frames where it is drawn although culled or hidden although visible.
 
 SMIL support: <animate> of ``d``, ``class``, ``visibility`` and ``display`` with values, keyTimes (or even
-spacing), calcMode linear or discrete, dur, repeatCount; a static ``transform`` on ancestors and
+spacing), calcMode linear or discrete, dur, repeatCount; a static ``transform`` on the path and its ancestors and
 <animateTransform> (translate, scale, rotate, matrix-free forms) on ancestor groups; viewBox scaling.
 """
 
@@ -328,6 +328,9 @@ def evaluate(data: bytes) -> Evaluated:
             gm, gv = group_cache[key]
             mat = mat @ gm
             vis = vis & gv
+        own = el.get("transform")
+        if own:
+            mat = mat @ _parse_transform(own)
         xy = np.einsum("tij,tvj->tvi", mat[:, :2, :2], xy) + mat[:, None, :2, 2]
         tris.append(int(m.group(1)))
         xys.append(xy)

@@ -147,16 +147,45 @@ def write_still(sheet: Sheet, options: ConversionOptions, report: Report, frame:
     return "\n".join(out).encode("utf-8")
 
 
-def _path_strings(q: np.ndarray) -> list[str]:
-    """Shortest relative syntax 'M x y l dx dy dx dy z' for integer triangles (N, 6)."""
+def _path_strings(q: np.ndarray, offset: np.ndarray | None = None) -> list[str]:
+    """Shortest relative syntax 'm x y dx dy dx dy z' for integer triangles (N, 6), less offset (N, 2).
+
+    A leading 'm' is absolute and the pairs after it are implicit relative linetos, so no 'l' is needed."""
     r = q.copy()
     r[:, 2:4] = q[:, 2:4] - q[:, 0:2]
     r[:, 4:6] = q[:, 4:6] - q[:, 2:4]
+    if offset is not None:
+        r[:, 0:2] -= offset
     if not len(r):
         return []
     # One format call for every row; a minus sign doubles as the separator, so " -" becomes "-".
-    text = (("M%d %dl%d %d %d %dz\x00" * len(r)) % tuple(r.ravel().tolist()))[:-1]
+    text = (("m%d %d %d %d %d %dz\x00" * len(r)) % tuple(r.ravel().tolist()))[:-1]
     return text.replace(" -", "-").split("\x00")
+
+
+def _digits(v: np.ndarray) -> np.ndarray:
+    """Characters of each integer written in decimal (sign included)."""
+    a = np.abs(v)
+    return 1 + (v < 0) + np.searchsorted(10 ** np.arange(1, 19, dtype=np.int64), a, side="right")
+
+
+def offsets(rows: np.ndarray, pk: np.ndarray, p: int) -> np.ndarray:
+    """Per path (P, 2) a static integer translate for its keys' moveto (rows (K, 6), path of each pk), where the
+    digits it saves outweigh its transform attribute; zero elsewhere."""
+    out = np.zeros((p, 2), np.int64)
+    if not len(rows):
+        return out
+    counts = np.bincount(pk, minlength=p)
+    starts = np.cumsum(counts) - counts
+    has = counts > 0
+    mid = (starts + counts // 2)[has]
+    for c in (0, 1):  # the median moveto of each path's keys
+        out[has, c] = rows[np.lexsort((rows[:, c], pk)), c][mid]
+    m = rows[:, :2]
+    saved = np.bincount(pk, (_digits(m) - _digits(m - out[pk])).sum(axis=1), minlength=p)
+    cost = len(' transform="translate( )"') + _digits(out).sum(axis=1)
+    out[saved <= cost] = 0
+    return out
 
 
 def _raw_strings(tri_xy: np.ndarray) -> list[str]:
@@ -331,7 +360,7 @@ def _varying(mask: np.ndarray, rows: np.ndarray) -> np.ndarray:
 
 def _uniform_instead(track: np.ndarray, active: np.ndarray, mask: np.ndarray, text: list[str],
                      decimals: np.ndarray, moving: np.ndarray, scale: int, radius: float, dur: str,
-                     d_anims: list[str]) -> int:
+                     d_anims: list[str], offset: np.ndarray) -> int:
     """Replace a path's keyed d animation by evenly spaced keys (no keyTimes) where that is shorter.
 
     Evenly spaced values are least-squares fitted and checked exactly (rounding included) against the full
@@ -362,7 +391,8 @@ def _uniform_instead(track: np.ndarray, active: np.ndarray, mask: np.ndarray, te
     if not values:
         return 0
     order = sorted(values)
-    strings = _path_strings(np.concatenate([values[j] for j in order]))
+    strings = _path_strings(np.concatenate([values[j] for j in order]),
+                            np.repeat(offset[order], [len(values[j]) for j in order], axis=0))
     pos = 0
     for j in order:
         n = len(values[j])
@@ -402,11 +432,13 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
     # Geometry.
     pk, fk = np.nonzero(keys.mask.T)
     rows = q.transpose(1, 0, 2)[pk, fk]
-    text = _path_strings(rows)
     moving = _varying(keys.mask, rows)
+    off = offsets(rows, pk, p)
+    off[~moving] = 0
+    text = _path_strings(rows, off[pk])
     d_anims, d_first, n_keys = _linear("d", keys.mask, text, kt_of, dur, moving)
     n_uniform = _uniform_instead(track, active, keys.mask, text, decimals, moving, view_scale,
-                                 bound, dur, d_anims)
+                                 bound, dur, d_anims, off)
     # Colour: linear keys within the colour tolerance; the first key's colour is the path's class.
     ckeys = color_keys(sheet.face_rgb[:, tris], active, color_tol)
     cpk, cfk = np.nonzero(ckeys.mask.T)
@@ -431,12 +463,13 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
     v_anims = _discrete("class", codes, names, key_time_strings(t, disc_decimals, discrete=True), dur)
     out = [_style(palette, view_scale), "<g>"]
     ids = path_ids(tris)
+    moves = [f' transform="translate({x} {y})"' if x or y else "" for x, y in off.tolist()]
     opens, closes = (plan.opens, plan.closes) if plan is not None else ({}, frozenset())
     for j in range(p):
         if j in opens:
             out.append(opens[j])
         body = d_anims[j] + c_anims[j] + v_anims[j]
-        el = f'<path id="{ids[j]}" class="{names[codes[0, j]]}" d="{d_first[j]}"'
+        el = f'<path id="{ids[j]}" class="{names[codes[0, j]]}"{moves[j]} d="{d_first[j]}"'
         out.append(f"{el}>{body}</path>" if body else f"{el}/>")
         if j in closes:
             out.append("</g>")

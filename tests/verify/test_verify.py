@@ -106,7 +106,7 @@ def test_sample_through_cli_svgz(sample_path, tmp_path):
 
 def _corrupt_one_value(svg: bytes, delta: int) -> bytes:
     """Move one coordinate of one key of the first animated path by delta viewBox units."""
-    m = re.search(rb'values="M(\d+) ', svg)
+    m = re.search(rb'values="m(-?\d+)', svg)
     return svg[: m.start(1)] + str(int(m.group(1)) + delta).encode() + svg[m.end(1):]
 
 

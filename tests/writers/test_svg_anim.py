@@ -76,7 +76,8 @@ def test_bounded_default_is_small_static_shared_and_drops_never_visible():
     assert f"f{anim.n_faces - 1}" not in ids and len(ids) == anim.n_faces - 1
     still = [p for p in ps if p.find(f"{SVG}animate") is None]
     assert len(still) >= 20
-    assert all(re.fullmatch(r"M\d+ \d+l[-\d ]+z", p.get("d")) for p in ps)  # integers, relative, shortest
+    # integers, relative, shortest: 'm' then implicit relative linetos, a minus sign as the separator
+    assert all(re.fullmatch(r"m-?\d+[ -]\d+(?: ?-?\d+){4}z", p.get("d")) for p in ps)
     classes = {p.get("class") for p in ps}
     assert len(classes) < len(ps) / 3  # fills shared through CSS classes
     root = etree.fromstring(data)
@@ -133,3 +134,21 @@ def test_raw_size_is_counted_exactly_without_writing():
     track[0, 0, 0] = -0.004  # rounds to zero: written and counted without a sign
     per_path = [";".join(svg_anim._raw_strings(track[:, j]) + svg_anim._raw_strings(track[-1:, j])) for j in range(7)]
     assert svg_anim.raw_values_bytes(track) == sum(len(v) for v in per_path)
+
+
+def test_offsets_shorten_keys_only_where_they_pay():
+    from converter.writers.svg_anim import _path_strings, offsets
+
+    far = np.array([[1200 + k, -3400 - k, 1205 + k, -3394 - k, 1212 + k, -3386 - k] for k in range(30)])  # far away
+    near = np.array([[3, 4, 5, 6, 7, 8], [4, 5, 5, 6, 7, 8]])  # two short keys: the attribute would cost more
+    rows = np.concatenate([far, near])
+    pk = np.array([0] * len(far) + [1] * len(near))
+    off = offsets(rows, pk, 2)
+    assert np.abs(off[0] - np.median(far[:, :2], axis=0)).max() <= 1 and off[1].tolist() == [0, 0]
+    plain, moved = _path_strings(far), _path_strings(far, off[pk[: len(far)]])
+    assert sum(map(len, moved)) < sum(map(len, plain)) - 30 * 4
+    # The moved text plus its translate is the same triangle: parse both back.
+    from converter.verify import _triangle_of_d
+
+    for a, b in zip(plain, moved):
+        assert np.allclose(np.array(_triangle_of_d(a)), np.array(_triangle_of_d(b)) + np.tile(off[0], 3))
