@@ -170,10 +170,10 @@ def _hat(n_frames: int, n_keys: int):
 
 
 def uniform_fit(x: np.ndarray, active: np.ndarray, n_keys: int, scale: float,
-                radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Evenly spaced keys (no keyTimes needed) for 2D point tracks x (T, N, 2m), least-squares fitted and
-    rounded to the 1/scale grid. Returns integer key values (n_keys, N, 2m) and whether every point stays
-    within radius (Euclidean) of x at every active frame, rounding included."""
+                radius: float | np.ndarray, pairs: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Evenly spaced keys (no keyTimes needed) for tracks x (T, N, D), least-squares fitted and rounded to the
+    1/scale grid. Returns integer key values (n_keys, N, D) and whether every track stays within radius of x at
+    every active frame, rounding included: Euclidean per 2D point when pairs, else per coordinate."""
     from scipy.linalg import solveh_banded
 
     t, n, d = x.shape
@@ -191,6 +191,7 @@ def uniform_fit(x: np.ndarray, active: np.ndarray, n_keys: int, scale: float,
     band[0, 1:] = ata.diagonal(1)
     v = solveh_banded(band, a.T @ flat + lam * prior)
     q = np.rint(v * scale)
-    err = np.linalg.norm((a @ (q / scale) - flat).reshape(t, n, d // 2, 2), axis=-1).max(axis=-1)
+    dev = (a @ (q / scale) - flat).reshape(t, n, d // 2, 2) if pairs else (a @ (q / scale) - flat).reshape(t, n, d, 1)
+    err = (np.linalg.norm(dev, axis=-1) if pairs else np.abs(dev[..., 0])).max(axis=-1)
     ok = ~(np.where(active, err, 0.0) > radius).any(axis=0)
     return q.reshape(n_keys, n, d).astype(np.int64), ok

@@ -2,8 +2,9 @@
 
 Captured faces sway and jitter as a whole; encoding every triangle's screen motion repeats that motion in every
 path. Here the triangles are split into *bands* (each part's connected pieces — skin, each eye, each iris,
-teeth, ... — merged where one band's motion explains another's, and the largest band, the head, cut into depth
-slices, since a turning head moves its nose and its cheeks differently on screen), and per band and frame the
+teeth, ... — merged where one band's motion explains another's, and the largest band, the head, cut into
+clusters that move alike once its own affine motion is taken out: a turning head moves its nose and its cheeks
+differently on screen, and brows, jaw and cheeks move on their own), and per band and frame the
 2D affine map that best explains the projected motion is fitted (robust least squares from the neutral frame).
 It is written as an SMIL transform stack on a ``<g>``:
 
@@ -36,16 +37,21 @@ from typing import NamedTuple
 
 import numpy as np
 from scipy import sparse
+from scipy.cluster.vq import kmeans2
 from scipy.sparse.csgraph import connected_components
 
 from converter import keyframes
 from converter.svgtext import number as svg_number
 
-SKIN_DEPTH_BANDS = 3  # depth slices of the largest band (the head)
+HEAD_CLUSTERS = 16  # motion clusters of the largest band (the head)
+CLUSTER_MIN_TRIANGLES = 50  # fewer clusters on small heads: at least this many triangles each
+CLUSTER_COMPONENTS = 12  # principal components of the residual trajectories the clustering uses
+CLUSTER_PLACE_WEIGHT = 0.5  # weight of the neutral position against the motion features (keeps clusters compact)
 MIN_BAND_TRIANGLES = 12  # smaller connected pieces join their part's largest piece
 SMALL_BAND_TRIANGLES, SMALL_BAND_SHARE = 100, 0.02  # pieces below max(these) never get a band of their own
 MERGE_PX = 1.5  # a piece whose motion a larger band explains this well (px, 95th percentile) joins it
 OVERLAP_BLOCK = 8  # frames per block of the bounding-box overlap search
+PAIR_BITMAP_MAX = 1 << 26  # path pairs deduplicated through a bitmap up to this many (8k paths, 64 MB)
 STROKE_MARGIN_PX = 0.5  # two paths closer than this may share stroke pixels: their order is kept
 TRANSFORM_SHARE = 0.1  # px the transform keyframing may leave to the residual, as a share of the tolerance
 HUBER_PX = 1.0  # scale of the robust (Cauchy) weights in the affine fit
@@ -96,6 +102,7 @@ class Plan(NamedTuple):
     gain: np.ndarray  # float64 (P,) local -> global error gain of each path (1 when plain)
     motions: tuple[BandMotion, ...]  # per band: the played transform
     stats: dict[str, float]
+    keys: keyframes.Keys  # the keyframes of track within radius (octagon tracks), already reduced here
 
 
 # --- bands ---------------------------------------------------------------------------------------------------
@@ -148,15 +155,35 @@ def merge_by_motion(piece: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutra
     return out
 
 
-def depth_slices(band: np.ndarray, depth: np.ndarray, slices: int) -> np.ndarray:
-    """Band id (F,) with the largest band cut into `slices` depth quantiles (per-triangle neutral depth)."""
+def motion_clusters(band: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutral: int, clusters: int) -> np.ndarray:
+    """Band id (F,) with the largest band (the head) cut into up to `clusters` bands that move alike on screen.
+
+    The head's own affine fit leaves, per vertex, a residual trajectory: depth parallax of the turning head and
+    expression (brows, jaw, cheeks). Triangles are clustered (k-means, seeded) on the leading principal
+    components of their vertices' residual trajectories, plus a little of their neutral position so that
+    clusters stay compact; each cluster then gets its own affine fit, which absorbs its share of that motion."""
     ids, sizes = np.unique(band, return_counts=True)
     big = ids[np.argmax(sizes)]
     sel = np.flatnonzero(band == big)
-    out = band * (slices + 1)  # room for the slice ids
-    if slices > 1:
-        edges = np.quantile(depth[sel], np.linspace(0, 1, slices + 1)[1:-1])
-        out[sel] += np.searchsorted(edges, depth[sel])
+    out = band * (clusters + 1)  # room for the cluster ids
+    k = min(clusters, len(sel) // CLUSTER_MIN_TRIANGLES)
+    if k < 2:
+        return out
+    verts, pos = np.unique(faces[sel], return_inverse=True)
+    ref = xy[neutral, verts]
+    center = ref.mean(axis=0)
+    fit = fit_affine(ref - center, xy[:, verts])
+    res = xy[:, verts] - (np.einsum("tij,nj->tni", fit[:, :, :2], ref - center) + fit[:, None, :, 2])
+    if np.percentile(np.linalg.norm(res - res.mean(axis=0), axis=-1), 95) <= MERGE_PX:
+        return out  # the head moves rigidly: one band explains it
+    feat = res.transpose(1, 0, 2).reshape(len(verts), -1)
+    feat = feat - feat.mean(axis=0)
+    u, sv, _ = np.linalg.svd(feat, full_matrices=False)
+    feat = u[:, :CLUSTER_COMPONENTS] * sv[:CLUSTER_COMPONENTS]
+    place = (ref - center) / max(float((ref - center).std()), 1e-9) * float(feat.std()) * CLUSTER_PLACE_WEIGHT
+    tri_feat = np.c_[feat, place][pos.reshape(-1, 3)].mean(axis=1)
+    _, label = kmeans2(tri_feat, k, seed=np.random.default_rng(0), minit="++")
+    out[sel] += label
     return out
 
 
@@ -295,6 +322,7 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP
     bands are returned (``reorder`` keeps each band's own order anyway)."""
     t, p = active.shape
     found = []
+    seen = np.zeros(p * p, bool) if p * p <= PAIR_BITMAP_MAX else None  # dedupe by scatter, not by sorting
     for k0 in range(0, t, block):
         act = active[k0:k0 + block]
         idx = np.flatnonzero(act.any(axis=0))
@@ -306,15 +334,21 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP
         hi = np.where(on, pts, -np.inf).max(axis=(0, 2)) + margin / 2
         cell = max(2.0 * float(np.median((hi - lo).max(axis=1))), 1.0)
         pairs = _cell_pairs(lo, hi, cell)
+        if band is not None:  # most neighbours share a band: drop them before the box test
+            pairs = pairs[band[idx[pairs[:, 0]]] != band[idx[pairs[:, 1]]]]
         a, b = pairs[:, 0], pairs[:, 1]
         hit = (np.maximum(lo[a], lo[b]) <= np.minimum(hi[a], hi[b])).all(axis=1)
         a, b = idx[a[hit]], idx[b[hit]]
-        if band is not None:
-            a, b = a[band[a] != band[b]], b[band[a] != band[b]]
-        found.append(np.minimum(a, b) * p + np.maximum(a, b))
-    if not found:
+        if seen is not None:
+            seen[np.minimum(a, b) * p + np.maximum(a, b)] = True
+        else:
+            found.append(np.unique(np.minimum(a, b) * p + np.maximum(a, b)))
+    if seen is not None:
+        code = np.flatnonzero(seen)
+    elif found:
+        code = np.unique(np.concatenate(found))
+    else:
         return np.zeros((0, 2), np.int64)
-    code = np.unique(np.concatenate(found))
     return np.column_stack([code // p, code % p])
 
 
@@ -352,19 +386,18 @@ def reorder(band: np.ndarray, pairs: np.ndarray) -> np.ndarray:
 
 
 # --- layout and plan --------------------------------------------------------------------------------------------
-def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, depth: np.ndarray, neutral: int,
+def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
            tris: np.ndarray, active: np.ndarray, tolerance: float, scale: int, kt_decimals: int = 4,
-           skin_bands: int = SKIN_DEPTH_BANDS, merge_runs: bool = True) -> Layout:
+           head_clusters: int = HEAD_CLUSTERS, merge_runs: bool = True) -> Layout:
     """Bands, played transforms, run order and local tracks for paths tris (P,) shown where active (T, P).
 
-    xy (T, V, 2) px and depth (T, V) come from the Sheet; tolerance px is the global bound the residual
+    xy (T, V, 2) px comes from the Sheet; tolerance px is the global bound the residual
     encoder works to (the transforms take TRANSFORM_SHARE of it as fitting slack, not as error)."""
     t = xy.shape[0]
     xy64 = xy.astype(np.float64)
-    tri_depth = depth[neutral][faces].mean(axis=1)
     small = max(SMALL_BAND_TRIANGLES, int(SMALL_BAND_SHARE * len(faces)))
     merged = merge_by_motion(components(faces, part_ids), faces, xy64, neutral, MERGE_PX, small)
-    band_of_tri = depth_slices(merged, tri_depth, skin_bands)
+    band_of_tri = motion_clusters(merged, faces, xy64, neutral, head_clusters)
     band_ids, band = np.unique(band_of_tri[tris], return_inverse=True)
     motions = []
     for b in band_ids.tolist():
@@ -418,16 +451,16 @@ def local_radius(tolerance: float, gain: np.ndarray, scale: int, time_budget: fl
     return (tolerance - time_budget - float_err) / g - math.sqrt(0.5) / scale
 
 
-def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, depth: np.ndarray, neutral: int,
+def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
          tris: np.ndarray, active: np.ndarray, track: np.ndarray, tolerance: float, scale: int,
          time_budget: float, float_err: float, global_radius: float, dur: str,
-         skin_bands: int = SKIN_DEPTH_BANDS, merge_runs: bool = True, bend: bool = False) -> Plan:
+         head_clusters: int = HEAD_CLUSTERS, merge_runs: bool = True, bend: bool = False) -> Plan:
     """Rigid layout for the bounded encoder: which runs of paths go under a group transform, and their tracks.
 
     A run is wrapped only when the keys it saves (local against global keyframe counts, at BYTES_PER_KEY)
     outweigh the text of its transform stack; other paths stay plain (global coordinates, no group)."""
     t, p = active.shape
-    lay = layout(xy, faces, part_ids, depth, neutral, tris, active, tolerance, scale, skin_bands=skin_bands,
+    lay = layout(xy, faces, part_ids, neutral, tris, active, tolerance, scale, head_clusters=head_clusters,
                  merge_runs=merge_runs)
     act = active[:, lay.order]
     glob = track[:, lay.order]
@@ -461,7 +494,9 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, depth: np.ndar
              "max_gain": float(lay.gain.max()) if p else 1.0}
     band = np.where(wrapped, lay.band, -1)
     gain = np.where(wrapped, lay.gain, 1.0)
-    return Plan(lay.order, out_track, radius, speed, opens, frozenset(closes), band, gain, lay.motions, stats)
+    keys = keyframes.Keys(np.where(wrapped, kl.mask, kg.mask), np.where(wrapped[:, None], kl.values, kg.values),
+                          np.where(wrapped, kl.first_active, kg.first_active))
+    return Plan(lay.order, out_track, radius, speed, opens, frozenset(closes), band, gain, lay.motions, stats, keys)
 
 
 def compose_tracks(plan_: Plan, local: np.ndarray) -> np.ndarray:
@@ -485,5 +520,5 @@ def plan_for(sheet, options, tris: np.ndarray, active: np.ndarray, track: np.nda
     time_budget = svg_anim.TIME_SHARE * tol
     float_err = 1e-4 + 2e-7 * max(sheet.camera.width, sheet.camera.height)  # as svg_anim._encode_keyed
     radius = tol - math.sqrt(0.5) / scale - time_budget - float_err
-    return plan(sheet.xy, sheet.faces, sheet.part_ids, sheet.depth, sheet.neutral, tris, active, track, tol, scale,
+    return plan(sheet.xy, sheet.faces, sheet.part_ids, sheet.neutral, tris, active, track, tol, scale,
                 time_budget, float_err, radius, dur, bend=True)

@@ -35,7 +35,7 @@ STROKE_PX = 0.5  # stroke of the fill colour hides anti-aliasing seams between n
 COLOR_TOLERANCE = 3.0  # 8-bit levels per channel a shown colour may differ from the exact flat shade
 QUANT_SHARE = 0.25  # share of the tolerance spent on integer rounding (the rest on keyframes)
 TIME_SHARE = 0.03  # share of the tolerance spent on rounding keyTimes
-UNIFORM_ROUNDS = (1.0,)  # evenly spaced keys tried at these multiples of the greedy key count
+UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
 HIDDEN_CLASS = "h"
 
 
@@ -358,48 +358,36 @@ def _varying(mask: np.ndarray, rows: np.ndarray) -> np.ndarray:
     return out
 
 
-def _uniform_instead(track: np.ndarray, active: np.ndarray, mask: np.ndarray, text: list[str],
-                     decimals: np.ndarray, moving: np.ndarray, scale: int, radius: float, dur: str,
-                     d_anims: list[str], offset: np.ndarray) -> int:
-    """Replace a path's keyed d animation by evenly spaced keys (no keyTimes) where that is shorter.
+def _uniform_instead(attribute: str, track: np.ndarray, active: np.ndarray, counts: np.ndarray,
+                     keyed_len: np.ndarray, value_len: np.ndarray, scale: float, radius: float | np.ndarray,
+                     pairs: bool, fmt, dur: str, anims: list[str]) -> int:
+    """Replace a path's keyed animation by evenly spaced keys (no keyTimes) where that is shorter.
 
-    Evenly spaced values are least-squares fitted and checked exactly (rounding included) against the full
-    Euclidean bound, so they often need no more keys than the greedy pass and save the keyTimes text.
-    d_anims is updated in place; returns how many paths changed."""
+    Evenly spaced values are least-squares fitted and checked exactly (rounding included) against the bound
+    (Euclidean per 2D point when pairs, else per coordinate), so they often need no more keys than the greedy
+    pass and save the keyTimes text. counts: greedy keys per path; keyed_len: its animation's length; value_len:
+    the typical length of one value; fmt(values (K, D) ints, path index) -> K strings. anims is updated in place;
+    returns how many paths changed."""
     t, p = active.shape
-    counts = mask.sum(axis=0)
-    lengths = np.array([len(x) for x in text], np.float64)
-    pk = np.nonzero(mask.T)[0]
-    per_key = np.bincount(pk, weights=lengths + 1, minlength=p) / np.maximum(counts, 1)
-    keyed_cost = counts * (per_key + decimals + 2)
     ladder = np.unique(np.round(np.geomspace(2, t + 1, 48)).astype(np.int64))
-    chosen = np.zeros(p, np.int64)
     values: dict[int, np.ndarray] = {}
+    todo = np.flatnonzero((counts >= 3) & (keyed_len > 0))
     for factor in UNIFORM_ROUNDS:
-        todo = np.flatnonzero(moving & (chosen == 0) & (counts >= 3))
         want = np.ceil(counts[todo] * factor).astype(np.int64)
         cand = ladder[np.minimum(np.searchsorted(ladder, want), len(ladder) - 1)]
-        worth = cand * per_key[todo] < keyed_cost[todo]
-        todo, cand = todo[worth], cand[worth]
-        for n in np.unique(cand).tolist():
-            idx = todo[cand == n]
+        head = len(f'<animate attributeName="{attribute}" dur="{dur}" repeatCount="indefinite" values=""/>')
+        worth = head + cand * (value_len[todo] + 1) - 1 < keyed_len[todo]
+        for n in np.unique(cand[worth]).tolist():
+            idx = todo[worth & (cand == n)]
             q, ok = keyframes.uniform_fit(track[:, idx], active[:, idx], n, scale,
-                                          radius if np.isscalar(radius) else radius[idx])
+                                          radius if np.isscalar(radius) else radius[idx], pairs)
             for j, col in zip(idx[ok].tolist(), np.flatnonzero(ok).tolist()):
-                chosen[j] = n
                 values[j] = q[:, col]
-    if not values:
-        return 0
-    order = sorted(values)
-    strings = _path_strings(np.concatenate([values[j] for j in order]),
-                            np.repeat(offset[order], [len(values[j]) for j in order], axis=0))
-    pos = 0
-    for j in order:
-        n = len(values[j])
-        d_anims[j] = (f'<animate attributeName="d" dur="{dur}" repeatCount="indefinite" '
-                      f'values="{";".join(strings[pos:pos + n])}"/>')
-        pos += n
-    return len(order)
+        todo = np.setdiff1d(todo, np.fromiter(values, np.int64, len(values)))
+    for j in sorted(values):
+        anims[j] = (f'<animate attributeName="{attribute}" dur="{dur}" repeatCount="indefinite" '
+                    f'values="{";".join(fmt(values[j], j))}"/>')
+    return len(values)
 
 
 def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, active: np.ndarray,
@@ -414,7 +402,10 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
     bound = tol - float_err
     if plan is not None:  # per path: local px, scaled down by the error gain of the path's group transform
         radius, bound = plan.radius, bound / plan.gain
-    keys = keyframes.reduce(keyframes.octagon_tracks(track), active, radius * keyframes.OCTAGON, bend=True)
+    if plan is not None:  # the plan reduced these tracks to decide its groups: the same keys
+        keys = plan.keys
+    else:
+        keys = keyframes.reduce(keyframes.octagon_tracks(track), active, radius * keyframes.OCTAGON, bend=True)
     q = np.rint(keys.values[..., :6] * view_scale).astype(np.int64)
     if plan is not None:
         step = plan.speed
@@ -437,8 +428,12 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
     off[~moving] = 0
     text = _path_strings(rows, off[pk])
     d_anims, d_first, n_keys = _linear("d", keys.mask, text, kt_of, dur, moving)
-    n_uniform = _uniform_instead(track, active, keys.mask, text, decimals, moving, view_scale,
-                                 bound, dur, d_anims, off)
+    counts = keys.mask.sum(axis=0)
+    d_len = np.array([len(a) for a in d_anims])
+    per_key = np.bincount(pk, np.fromiter(map(len, text), np.float64, len(text)), p) / np.maximum(counts, 1)
+    n_uniform = _uniform_instead("d", track, active, counts, d_len, per_key, view_scale,
+                                 bound, True, lambda v, j: _path_strings(v, np.broadcast_to(off[j], (len(v), 2))),
+                                 dur, d_anims)
     # Colour: linear keys within the colour tolerance; the first key's colour is the path's class.
     ckeys = color_keys(sheet.face_rgb[:, tris], active, color_tol)
     cpk, cfk = np.nonzero(ckeys.mask.T)
@@ -447,6 +442,10 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
     c_dec = min(6, int(math.ceil(math.log10(max(t, 2)))) + 2)  # a colour lags at most 255 T 10^-d / 2 levels
     c_table = tables.get(c_dec) or key_time_strings(t, c_dec, discrete=False)
     c_anims, _, n_color_keys = _linear("color", ckeys.mask, _hex(crow).tolist(), [c_table] * p, dur, c_vary)
+    c_len = np.array([len(a) for a in c_anims])
+    n_uniform += _uniform_instead("color", sheet.face_rgb[:, tris].astype(np.float64) * 255, active,
+                                  ckeys.mask.sum(axis=0), c_len, np.full(p, 7.0), 1.0, color_tol - 0.05, False,
+                                  lambda v, j: _hex(np.clip(v, 0, 255)).tolist(), dur, c_anims)
     cbounds = np.searchsorted(cpk, np.arange(p + 1))[:-1]
     packed = (crow[:, 0] << 16) | (crow[:, 1] << 8) | crow[:, 2]
     base = packed[np.minimum(cbounds, max(len(packed) - 1, 0))] if len(packed) else np.zeros(p, np.int64)

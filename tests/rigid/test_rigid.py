@@ -90,7 +90,7 @@ def _plan(sheet, tol, **kw):
     scale = max(1, math.ceil(1 / (math.sqrt(2) * 0.25 * tol)))
     tb, fe = 0.03 * tol, 1e-3
     rg = tol - math.sqrt(0.5) / scale - tb - fe
-    return rigid.plan(sheet.xy, sheet.faces, sheet.part_ids, sheet.depth, 0, tris, act, track, tol, scale, tb, fe,
+    return rigid.plan(sheet.xy, sheet.faces, sheet.part_ids, 0, tris, act, track, tol, scale, tb, fe,
                       rg, "2.4s", **kw), act, track, scale, rg
 
 
