@@ -66,7 +66,7 @@ def _sheet(anim, size: int):
 
 # --- the levers measured on their own, by rewriting the paths of one output -----------------------------------
 _D = re.compile(r'( d="|values=")([^"]*)"')
-_PATH = re.compile(r"M(-?\d+) (-?\d+)l(-?\d+) ?(-?\d+) ?(-?\d+) ?(-?\d+)z")
+_PATH = re.compile(r"m(-?\d+) ?(-?\d+) ?(-?\d+) ?(-?\d+) ?(-?\d+) ?(-?\d+)z")
 
 
 def _rewrite_paths(data: bytes, fn) -> bytes:
@@ -207,6 +207,13 @@ def _levers(sheet, anim, data: bytes, raw_n: int) -> list[str]:
     absolute = len(_rewrite_paths(data, _absolute))
     decimals = len(_rewrite_paths(data, _decimals_px(scale)))
     kt_bytes, kt_n, kt_dup = _keytimes_bytes(data)
+    with_l = len(_rewrite_paths(data, lambda x, y, a, b, c, d: f"M{x} {y}l{a} {b} {c} {d}z".replace(" -", "-")))
+    real_offsets = svg_anim.offsets
+    svg_anim.offsets = lambda rows, pk, p: np.zeros((p, 2), np.int64)
+    try:
+        no_offsets, _, _ = _write(sheet, ConversionOptions(tolerance=0.5))
+    finally:
+        svg_anim.offsets = real_offsets
     out = [
         "Levers, each on its own, at 0.5 px (default output = rigid, relative integer paths; sizes in KB; %"
         " of raw):",
@@ -217,6 +224,10 @@ def _levers(sheet, anim, data: bytes, raw_n: int) -> list[str]:
         f" {_pct(absolute - base, raw_n)} of raw |",
         f"| precision tied to tolerance (integers on a 1/{scale} px grid vs 2-decimal px) | {_kb(decimals)} |"
         f" {_kb(base)} | {_pct(decimals - base, raw_n)} of raw |",
+        f"| implicit linetos (`m x y dx dy dx dy z` vs `M x y l dx dy dx dy z`) | {_kb(with_l)} | {_kb(base)} |"
+        f" {_pct(with_l - base, raw_n)} of raw |",
+        f"| a static per-path `translate` where it shortens the keys' moveto numbers | {_kb(len(no_offsets))} |"
+        f" {_kb(base)} | {_pct(len(no_offsets) - base, raw_n)} of raw |",
         f"| keyTimes: {kt_n} attributes, {kt_dup} repeat an earlier one verbatim (the most sharing could save) |"
         f" {_kb(base)} | {_kb(base - kt_bytes * kt_dup / max(kt_n, 1))} | at most {_pct(kt_bytes * kt_dup / max(kt_n, 1), raw_n)}"
         f" of raw ({_kb(kt_bytes)} KB of keyTimes in all) |",
