@@ -96,7 +96,6 @@ class Plan(NamedTuple):
     order: np.ndarray  # int (P,) new document order of the input paths
     track: np.ndarray  # float64 (T, P, 6) px to encode per path: local (in a group) or global (plain)
     radius: np.ndarray  # float64 (P,) Euclidean px the keyframing of each path may use
-    speed: np.ndarray  # float64 (P,) fastest composed px/frame of each path (for keyTimes rounding)
     opens: dict[int, str]  # path index (new order) -> '<g>' + transform stack written before it
     closes: frozenset[int]  # path indices (new order) after which a '</g>' closes the run
     band: np.ndarray  # int (P,) band of each path in the new order, -1 when plain (no group)
@@ -509,11 +508,6 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
             wrapped[a:b] = True
     out_track = np.where(wrapped[None, :, None], lay.local, glob)
     radius = np.where(wrapped, r_local, global_radius)
-    if t > 1:
-        step = np.linalg.norm(np.diff(out_track.reshape(t, p, 3, 2), axis=0), axis=-1).max(axis=(0, 2))
-    else:
-        step = np.zeros(p)
-    speed = np.where(wrapped, step * lay.gain, step)
     stats = {"bands": len(lay.motions), "runs": len(lay.runs) - 1, "groups": len(opens),
              "grouped_paths": int(wrapped.sum()), "transform_bytes": sum(len(texts[int(lay.band[a])]) for a in opens),
              "keys_global": int(kg.mask.sum()),
@@ -523,7 +517,7 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
     gain = np.where(wrapped, lay.gain, 1.0)
     keys = keyframes.Keys(np.where(wrapped, kl.mask, kg.mask), np.where(wrapped[:, None], kl.values, kg.values),
                           np.where(wrapped, kl.first_active, kg.first_active))
-    return Plan(lay.order, out_track, radius, speed, opens, frozenset(closes), band, gain, lay.motions, stats, keys)
+    return Plan(lay.order, out_track, radius, opens, frozenset(closes), band, gain, lay.motions, stats, keys)
 
 
 def compose_tracks(plan_: Plan, local: np.ndarray) -> np.ndarray:

@@ -33,8 +33,9 @@ from converter.svgtext import number as svg_number
 FORMAT_VERSION = 2
 STROKE_PX = 0.5  # stroke of the fill colour hides anti-aliasing seams between neighbours
 COLOR_TOLERANCE = 3.0  # 8-bit levels per channel a shown colour may differ from the exact flat shade
+COLOR_TIME_LEVELS = 0.1  # of which rounding the colour keyTimes may take
 QUANT_SHARE = 0.25  # share of the tolerance spent on integer rounding (the rest on keyframes)
-TIME_SHARE = 0.03  # share of the tolerance spent on rounding keyTimes
+TIME_SHARE = 0.015  # share of the tolerance spent on rounding keyTimes
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
 HIDDEN_CLASS = "h"
 
@@ -67,13 +68,41 @@ def key_time_strings(n_frames: int, decimals: int, discrete: bool) -> list[str]:
     return [svg_number(u / q, decimals) for u in units.tolist()]
 
 
-def key_time_decimals(n_frames: int, speed: np.ndarray, tolerance: float, budget: float) -> np.ndarray:
-    """Per path the fewest keyTimes decimals whose rounding moves a vertex at most budget px.
+def key_time_decimals(n_frames: int, slope: np.ndarray, budget: float) -> np.ndarray:
+    """Per key the fewest keyTimes decimals whose rounding moves the played value at most budget.
 
-    Rounding key times by delta shifts a linear segment's fraction by at most 2 delta T / (frames it spans),
-    so a vertex moves at most T (speed + tolerance) 10^-d px (speed: the path's fastest px per frame)."""
-    d = np.ceil(np.log10(np.maximum(n_frames * (np.asarray(speed) + tolerance) / budget, 1.0)))
-    return np.clip(d, 3, 12).astype(np.int64)
+    Rounding a key time moves it by at most half a unit of the last decimal, T 10^-d / 2 frames; a linear
+    interpolant moves by at most that times the slope (change per frame) of the segments the key bounds.
+    Never fewer decimals than keep the times of distinct frames distinct."""
+    need = n_frames * 0.5 * np.asarray(slope, np.float64) / budget
+    d = np.ceil(np.log10(np.maximum(need, 1.0)))
+    low = math.ceil(math.log10(max(n_frames, 2)))
+    return np.clip(d, low, 12).astype(np.int64)
+
+
+def key_slopes(mask: np.ndarray, rows: np.ndarray, pairs: bool) -> np.ndarray:
+    """Per key (path-major, as np.nonzero(mask.T)) the fastest change per frame of the segments it bounds;
+    rows (K, D) are the key values: Euclidean per 2D point when pairs, else per coordinate."""
+    pk, fk = np.nonzero(mask.T)
+    out = np.zeros(len(pk))
+    if len(pk) < 2:
+        return out
+    same = pk[1:] == pk[:-1]
+    dv = np.diff(np.asarray(rows, np.float64), axis=0)
+    step = np.linalg.norm(dv.reshape(len(dv), -1, 2), axis=-1) if pairs else np.abs(dv)
+    seg = np.where(same, step.max(axis=1) / np.maximum(np.diff(fk), 1), 0.0)  # segment i: key i -> key i + 1
+    out[:-1] = seg
+    out[1:] = np.maximum(out[1:], seg)
+    return out
+
+
+def key_time_texts(n_frames: int, frames: np.ndarray, decimals: np.ndarray) -> list[str]:
+    """keyTimes text of each key (frame k at k/T) with its own number of decimals."""
+    out = np.empty(len(frames), object)
+    for dj in np.unique(decimals).tolist():
+        sel = decimals == dj
+        out[sel] = np.asarray(key_time_strings(n_frames, dj, discrete=False), object)[frames[sel]]
+    return out.tolist()
 
 
 def metadata(sheet: Sheet, options: ConversionOptions, report: Report, extra: dict | None = None,
@@ -202,7 +231,7 @@ def color_keys(rgb: np.ndarray, active: np.ndarray, tolerance: float) -> keyfram
     """Colour (T, P, 3) in 0..1 as linear keys within tolerance 8-bit levels per channel where shown (values
     rounded to integer levels, which the tolerance includes)."""
     levels = np.asarray(rgb, np.float64) * 255
-    keys = keyframes.reduce(levels, active, max(tolerance - 0.6, 1e-6))  # rounding 0.5, keyTimes 0.1
+    keys = keyframes.reduce(levels, active, max(tolerance - 0.5 - COLOR_TIME_LEVELS, 1e-6))  # rounding, keyTimes
     q = np.clip(np.rint(keys.values), 0, 255)
     return keys._replace(values=q)
 
@@ -317,15 +346,13 @@ def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.nd
     return out
 
 
-def _linear(attribute: str, mask: np.ndarray, text: list[str], kt_of: list[list[str]], dur: str,
+def _linear(attribute: str, mask: np.ndarray, text: list[str], kt_text: list[str], dur: str,
             animate: np.ndarray) -> tuple[list[str], list[str], int]:
-    """Per path a linear <animate> through its keys (mask (T+1, P), texts path-major) where animate[j].
-
-    Returns the animations, each path's first key text and the number of keys written."""
+    """Per path a linear <animate> through its keys (mask (T+1, P); value and keyTimes texts path-major)
+    where animate[j]."""
     t1, p = mask.shape
     pk, fk = np.nonzero(mask.T)
     bounds = np.searchsorted(pk, np.arange(p + 1)).tolist()
-    fkl = fk.tolist()
     out, first, n = [""] * p, [""] * p, 0
     for j in range(p):
         a, b = bounds[j], bounds[j + 1]
@@ -335,9 +362,8 @@ def _linear(attribute: str, mask: np.ndarray, text: list[str], kt_of: list[list[
         if not animate[j]:
             n += 1
             continue
-        kt = kt_of[j]
         out[j] = (f'<animate attributeName="{attribute}" dur="{dur}" repeatCount="indefinite" '
-                  f'keyTimes="{";".join([kt[k] for k in fkl[a:b]])}" values="{";".join(text[a:b])}"/>')
+                  f'keyTimes="{";".join(kt_text[a:b])}" values="{";".join(text[a:b])}"/>')
         n += b - a
     return out, first, n
 
@@ -407,27 +433,20 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
     else:
         keys = keyframes.reduce(keyframes.octagon_tracks(track), active, radius * keyframes.OCTAGON, bend=True)
     q = np.rint(keys.values[..., :6] * view_scale).astype(np.int64)
-    if plan is not None:
-        step = plan.speed
-    elif t > 1:
-        step = np.linalg.norm(np.diff(track.reshape(t, p, 3, 2), axis=0), axis=-1).max(axis=(0, 2))
-    else:
-        step = np.zeros(p)
-    decimals = key_time_decimals(t, step, tol, time_budget)
+    pk, fk = np.nonzero(keys.mask.T)
+    rows = q.transpose(1, 0, 2)[pk, fk]
+    gain = plan.gain[pk] if plan is not None else 1.0  # local px -> output px
+    decimals = key_time_decimals(t, key_slopes(keys.mask, rows, True) / view_scale * gain, time_budget)
     color_tol = COLOR_TOLERANCE
     enc = {"scale": view_scale, "tolerance": tol, "fit_px": round(float(np.min(radius)), 6),
            "color_levels": color_tol,
-           "keytime_decimals": [int(decimals.min()), int(decimals.max())] if p else []}
-    tables = {dj: key_time_strings(t, dj, discrete=False) for dj in set(decimals.tolist()) | {6}}
-    kt_of = [tables[dj] for dj in decimals.tolist()]
+           "keytime_decimals": [int(decimals.min()), int(decimals.max())] if len(decimals) else []}
     # Geometry.
-    pk, fk = np.nonzero(keys.mask.T)
-    rows = q.transpose(1, 0, 2)[pk, fk]
     moving = _varying(keys.mask, rows)
     off = offsets(rows, pk, p)
     off[~moving] = 0
     text = _path_strings(rows, off[pk])
-    d_anims, d_first, n_keys = _linear("d", keys.mask, text, kt_of, dur, moving)
+    d_anims, d_first, n_keys = _linear("d", keys.mask, text, key_time_texts(t, fk, decimals), dur, moving)
     counts = keys.mask.sum(axis=0)
     d_len = np.array([len(a) for a in d_anims])
     per_key = np.bincount(pk, np.fromiter(map(len, text), np.float64, len(text)), p) / np.maximum(counts, 1)
@@ -439,9 +458,9 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
     cpk, cfk = np.nonzero(ckeys.mask.T)
     crow = ckeys.values.transpose(1, 0, 2)[cpk, cfk].astype(np.int64)
     c_vary = _varying(ckeys.mask, crow)
-    c_dec = min(6, int(math.ceil(math.log10(max(t, 2)))) + 2)  # a colour lags at most 255 T 10^-d / 2 levels
-    c_table = tables.get(c_dec) or key_time_strings(t, c_dec, discrete=False)
-    c_anims, _, n_color_keys = _linear("color", ckeys.mask, _hex(crow).tolist(), [c_table] * p, dur, c_vary)
+    c_dec = key_time_decimals(t, key_slopes(ckeys.mask, crow, False), COLOR_TIME_LEVELS)
+    c_anims, _, n_color_keys = _linear("color", ckeys.mask, _hex(crow).tolist(), key_time_texts(t, cfk, c_dec), dur,
+                                       c_vary)
     c_len = np.array([len(a) for a in c_anims])
     n_uniform += _uniform_instead("color", sheet.face_rgb[:, tris].astype(np.float64) * 255, active,
                                   ckeys.mask.sum(axis=0), c_len, np.full(p, 7.0), 1.0, color_tol - 0.05, False,
