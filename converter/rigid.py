@@ -1,12 +1,16 @@
-"""Rigid-motion factoring: per band of triangles an animated 2D affine group transform, residuals in its frame.
+"""Rigid-motion factoring: a head transform around everything, band transforms inside it, residuals last.
 
 Captured faces sway and jitter as a whole; encoding every triangle's screen motion repeats that motion in every
-path. Here the triangles are split into *bands* (each part's connected pieces — skin, each eye, each iris,
-teeth, ... — merged where one band's motion explains another's, and the largest band, the head, cut into
-clusters that move alike once its own affine motion is taken out: a turning head moves its nose and its cheeks
-differently on screen, and brows, jaw and cheeks move on their own), and per band and frame the
-2D affine map that best explains the projected motion is fitted (robust least squares from the neutral frame).
-It is written as an SMIL transform stack on a ``<g>``:
+path. Two levels of animated 2D affine group transforms take it out:
+
+- the *head*: the largest piece (the skin) fitted per frame on screen. It carries the pose jitter, so it is
+  keyed nearly every frame, but it is written once: one ``<g>`` around every path of the document.
+- *bands*, inside the head's frame: each part's connected pieces (each eye, each iris, teeth, ...) merged where
+  one band's motion explains another's, and the skin cut into clusters that move alike once the head's
+  motion is taken out (k-means on residual trajectories: a turning head moves its nose and its cheeks
+  differently on screen, and brows, jaw and cheeks move on their own).
+
+Each fit is robust least squares from the neutral frame, written as an SMIL transform stack on a ``<g>``:
 
     translate(tx ty) rotate(a) skewX(k) scale(sx sy)     each an <animateTransform additive="sum">
 
@@ -15,18 +19,19 @@ centroid (path coordinates are relative to it). Each parameter is keyframed on i
 ``keyframes.reduce`` and rounded; SMIL interpolates the parameters linearly, so the *played* transform
 between keys is not the fitted one.
 
-Why the bound still holds: the residual each path encodes is measured against the played transform, not the
-fitted one: local = M_played(t)^-1 (exact(t)). Whatever the transform keyframing and rounding leave out
-becomes residual motion, which the error-bounded encoder keeps within a local radius r_local. The composed
-error is |L(t) (local_played - local_exact)| <= sigma_max(L(t)) r_local, so choosing
-r_local = r_global / max_t sigma_max(L(t)) keeps the final composed position within the global radius.
+Why the bound still holds: the residual each path encodes is measured against the played transforms, not the
+fitted ones: local = B_played(t)^-1 H_played(t)^-1 (exact(t)). Whatever the transform keyframing and rounding
+leave out becomes residual motion, which the error-bounded encoder keeps within a local radius r_local. The
+composed error is |L(t) (local_played - local_exact)| <= sigma_max(L(t)) r_local with L the product of the
+linear parts, so r_local = r_global / max_t sigma_max(L(t)) keeps the final position within the global radius.
 
 Painter's order: triangles are drawn back to front across bands (the eyes sit between the skin of the socket
 and the eyelids), so one <g> per band would break the order. Paths are grouped in *runs* of consecutive
 same-band paths, each run its own <g> with (a copy of) the band's transform animation. ``reorder`` first moves
-paths past each other where that cannot change a pixel (their boxes never meet in a frame where both are
-drawn), greedily continuing the current band, which merges many runs; ``plan`` then wraps only the runs whose
-saved keys outweigh the text of their transform stack, and leaves the others plain.
+paths past each other where that cannot change a pixel (``overlap_pairs``: they never come near each other in
+a frame where both are drawn), greedily continuing the current band, which merges many runs; ``plan`` then
+wraps only the runs whose saved keys outweigh the text of their transform stack, and leaves the others in the
+head's frame. When even the head group does not pay for itself, nothing is grouped.
 """
 
 from __future__ import annotations
@@ -43,7 +48,7 @@ from scipy.sparse.csgraph import connected_components
 from converter import keyframes
 from converter.svgtext import number as svg_number
 
-HEAD_CLUSTERS = 16  # motion clusters of the largest band (the head)
+HEAD_CLUSTERS = 24  # motion clusters of the largest band (the head)
 CLUSTER_MIN_TRIANGLES = 50  # fewer clusters on small heads: at least this many triangles each
 CLUSTER_COMPONENTS = 12  # principal components of the residual trajectories the clustering uses
 CLUSTER_PLACE_WEIGHT = 0.5  # weight of the neutral position against the motion features (keeps clusters compact)
@@ -54,7 +59,8 @@ OVERLAP_BLOCK = 8  # frames per block of the bounding-box overlap search
 PAIR_BITMAP_MAX = 1 << 26  # path pairs deduplicated through a bitmap up to this many (8k paths, 64 MB)
 PAIR_CHUNK = 16384  # candidate pairs tested at once (bounds the temporary arrays)
 STROKE_MARGIN_PX = 0.5  # two paths closer than this may share stroke pixels: their order is kept
-TRANSFORM_SHARE = 0.1  # px the transform keyframing may leave to the residual, as a share of the tolerance
+HEAD_SHARE = 0.1  # px the head transform's keyframing may leave to the residual, as a share of the tolerance
+BAND_SHARE = 0.3  # the same for each band's transform inside the head's (smooth there, and repeated per run)
 HUBER_PX = 1.0  # scale of the robust (Cauchy) weights in the affine fit
 FIT_ITERATIONS = 3
 EVERY_FRAME_SHARE = 0.8  # when keyframing keeps more frames than this share, write every frame (no keyTimes)
@@ -87,7 +93,9 @@ class Layout(NamedTuple):
     runs: np.ndarray  # int (R + 1,) start of each run of same-band paths, then P
     motions: tuple[BandMotion, ...]  # per band
     local: np.ndarray  # float64 (T, P, 6) path vertices in their band's local px (relative to the centroid)
-    gain: np.ndarray  # float64 (P,) error gain of each path's band
+    gain: np.ndarray  # float64 (P,) error gain of each path's band, head transform included
+    head: BandMotion  # the head's transform: the outermost group, around every path
+    head_local: np.ndarray  # float64 (T, P, 6) path vertices in the head's local px
 
 
 class Plan(NamedTuple):
@@ -103,6 +111,8 @@ class Plan(NamedTuple):
     motions: tuple[BandMotion, ...]  # per band: the played transform
     stats: dict[str, float]
     keys: keyframes.Keys  # the keyframes of track within radius (octagon tracks), already reduced here
+    head: BandMotion | None  # the outermost group's transform (None: no groups at all)
+    outer: str  # '<g>' and the head's transform stack, opened before the first path
 
 
 # --- bands ---------------------------------------------------------------------------------------------------
@@ -415,42 +425,52 @@ def reorder(band: np.ndarray, pairs: np.ndarray) -> np.ndarray:
 def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
            tris: np.ndarray, active: np.ndarray, tolerance: float, scale: int, kt_decimals: int = 4,
            head_clusters: int = HEAD_CLUSTERS, merge_runs: bool = True) -> Layout:
-    """Bands, played transforms, run order and local tracks for paths tris (P,) shown where active (T, P).
+    """Head motion, bands, played transforms, run order and local tracks for paths tris (P,) shown where
+    active (T, P).
 
-    xy (T, V, 2) px comes from the Sheet; tolerance px is the global bound the residual
-    encoder works to (the transforms take TRANSFORM_SHARE of it as fitting slack, not as error)."""
+    xy (T, V, 2) px comes from the Sheet; tolerance px is the global bound the residual encoder works to (the
+    transforms take HEAD_SHARE and BAND_SHARE of it as fitting slack, not as error). The head's transform is
+    fitted on the screen positions and keyed tightly (it carries the capture's pose jitter, every frame, once
+    for the whole document); each band's transform is fitted in the head's frame, where what is left is
+    smooth, and keyed loosely, since every run of the band repeats it."""
     t = xy.shape[0]
     xy64 = xy.astype(np.float64)
     small = max(SMALL_BAND_TRIANGLES, int(SMALL_BAND_SHARE * len(faces)))
     merged = merge_by_motion(components(faces, part_ids), faces, xy64, neutral, MERGE_PX, small)
-    band_of_tri = motion_clusters(merged, faces, xy64, neutral, head_clusters)
+    ids, sizes = np.unique(merged, return_counts=True)
+    head = _motion(xy64, np.unique(faces[merged == ids[np.argmax(sizes)]]), neutral, HEAD_SHARE * tolerance,
+                   scale, kt_decimals)
+    in_head = local_tracks(xy64[:, :, None, :], head.matrices)[:, :, 0]  # head frame px, about its centroid
+    band_of_tri = motion_clusters(merged, faces, in_head, neutral, head_clusters)
     band_ids, band = np.unique(band_of_tri[tris], return_inverse=True)
-    motions = []
-    for b in band_ids.tolist():
-        verts = np.unique(faces[band_of_tri == b])
-        ref = xy64[neutral, verts]
-        center = ref.mean(axis=0)
-        radius = float(np.linalg.norm(ref - center, axis=1).max()) if len(verts) else 1.0
-        a = fit_affine(ref - center, xy64[:, verts])
-        params = decompose(a, np.zeros(2))
-        motions.append(band_motion(params, center, radius, TRANSFORM_SHARE * tolerance, scale, kt_decimals))
-    path_xy = xy64[:, faces[tris]]  # (T, P, 3, 2)
+    motions = [_motion(in_head, np.unique(faces[band_of_tri == b]), neutral, BAND_SHARE * tolerance, scale,
+                       kt_decimals) for b in band_ids.tolist()]
     order = np.arange(len(tris))
     if merge_runs and len(tris) > 1:
-        order = reorder(band, overlap_pairs(path_xy, active, band=band))
+        order = reorder(band, overlap_pairs(xy64[:, faces[tris]], active, band=band))
     band = band[order]
-    path_xy = path_xy[:, order]
+    path_head = in_head[:, faces[tris[order]]]  # (T, P, 3, 2) head frame
     local = np.zeros((t, len(tris), 3, 2))
+    gains = np.zeros(len(band_ids))
     for b, m in enumerate(motions):
         sel = np.flatnonzero(band == b)
-        local[:, sel] = local_tracks(path_xy[:, sel], m.matrices)
-    local = local.reshape(t, len(tris), 6)
+        local[:, sel] = local_tracks(path_head[:, sel], m.matrices)
+        lin = np.einsum("tij,tjk->tik", head.matrices[:, :, :2], m.matrices[:, :, :2])
+        gains[b] = float(np.linalg.svd(lin, compute_uv=False).max()) if t else 1.0
     change = np.flatnonzero(np.diff(band)) + 1
     runs = np.concatenate([[0], change, [len(tris)]]).astype(np.int64)
-    gains = np.array([m.gain for m in motions])[band]
-    return Layout(order, band, runs, tuple(motions), local, gains)
+    return Layout(order, band, runs, tuple(motions), local.reshape(t, len(tris), 6), gains[band], head,
+                  path_head.reshape(t, len(tris), 6))
 
 
+def _motion(xy: np.ndarray, verts: np.ndarray, neutral: int, budget: float, scale: int,
+            kt_decimals: int) -> BandMotion:
+    """The played transform of the vertices verts of xy (T, V, 2), fitted from the neutral frame."""
+    ref = xy[neutral, verts]
+    center = ref.mean(axis=0)
+    radius = float(np.linalg.norm(ref - center, axis=1).max()) if len(verts) else 1.0
+    params = decompose(fit_affine(ref - center, xy[:, verts]), np.zeros(2))
+    return band_motion(params, center, radius, budget, scale, kt_decimals)
 
 
 def group_open(motion: BandMotion, n_frames: int, dur: str, kt_decimals: int = 4) -> str:
@@ -481,21 +501,26 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
          tris: np.ndarray, active: np.ndarray, track: np.ndarray, tolerance: float, scale: int,
          time_budget: float, float_err: float, global_radius: float, dur: str,
          head_clusters: int = HEAD_CLUSTERS, merge_runs: bool = True, bend: bool = False) -> Plan:
-    """Rigid layout for the bounded encoder: which runs of paths go under a group transform, and their tracks.
+    """Rigid layout for the bounded encoder: the head group around everything, which runs of paths go under a
+    band's group inside it, and their tracks.
 
-    A run is wrapped only when the keys it saves (local against global keyframe counts, at BYTES_PER_KEY)
-    outweigh the text of its transform stack; other paths stay plain (global coordinates, no group)."""
+    A run is wrapped only when the keys it saves (band-local against head-local keyframe counts, at
+    BYTES_PER_KEY) outweigh the text of its transform stack; the other paths sit in the head's frame. When even
+    that costs more than the plain encoding (global keys), nothing is grouped."""
     t, p = active.shape
     lay = layout(xy, faces, part_ids, neutral, tris, active, tolerance, scale, head_clusters=head_clusters,
                  merge_runs=merge_runs)
     act = active[:, lay.order]
     glob = track[:, lay.order]
     r_local = local_radius(tolerance, lay.gain, scale, time_budget, float_err)
+    r_head = float(local_radius(tolerance, np.array([lay.head.gain]), scale, time_budget, float_err)[0])
     ok = r_local > 0.05 * global_radius  # a band that magnifies errors too much is not worth it
-    kg = keyframes.reduce(keyframes.octagon_tracks(glob), act, global_radius * keyframes.OCTAGON, bend=bend)
-    kl = keyframes.reduce(keyframes.octagon_tracks(lay.local), act, np.maximum(r_local, 1e-6) * keyframes.OCTAGON,
-                          bend=bend)
-    saved = (kg.mask.sum(axis=0) - kl.mask.sum(axis=0)) * BYTES_PER_KEY
+
+    def keys_of(x, r):
+        return keyframes.reduce(keyframes.octagon_tracks(x), act, np.maximum(r, 1e-6) * keyframes.OCTAGON, bend=bend)
+
+    kg, kh, kl = keys_of(glob, global_radius), keys_of(lay.head_local, r_head), keys_of(lay.local, r_local)
+    saved = (kh.mask.sum(axis=0) - kl.mask.sum(axis=0)) * BYTES_PER_KEY
     opens: dict[int, str] = {}
     closes = set()
     wrapped = np.zeros(p, bool)
@@ -506,29 +531,42 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
             opens[a] = texts[band]
             closes.add(b - 1)
             wrapped[a:b] = True
-    out_track = np.where(wrapped[None, :, None], lay.local, glob)
-    radius = np.where(wrapped, r_local, global_radius)
+    outer = group_open(lay.head, t, dur)
+    n_keys = np.where(wrapped, kl.mask.sum(0), kh.mask.sum(0))
+    grouped_cost = int(n_keys.sum()) * BYTES_PER_KEY + len(outer) + sum(len(texts[int(lay.band[a])]) for a in opens)
     stats = {"bands": len(lay.motions), "runs": len(lay.runs) - 1, "groups": len(opens),
-             "grouped_paths": int(wrapped.sum()), "transform_bytes": sum(len(texts[int(lay.band[a])]) for a in opens),
-             "keys_global": int(kg.mask.sum()),
-             "keys_rigid": int(np.where(wrapped, kl.mask.sum(0), kg.mask.sum(0)).sum()),
-             "max_gain": float(lay.gain.max()) if p else 1.0}
+             "grouped_paths": int(wrapped.sum()), "keys_global": int(kg.mask.sum()),
+             "max_gain": float(max(lay.gain.max(), lay.head.gain)) if p else 1.0}
+    if grouped_cost >= int(kg.mask.sum()) * BYTES_PER_KEY:  # the plain encoding is shorter: no groups
+        stats.update(groups=0, grouped_paths=0, transform_bytes=0, keys_rigid=int(kg.mask.sum()))
+        return Plan(lay.order, glob, np.full(p, global_radius), {}, frozenset(), np.full(p, -1), np.ones(p),
+                    lay.motions, stats, kg, None, "<g>")
+    stats.update(transform_bytes=len(outer) + sum(len(texts[int(lay.band[a])]) for a in opens),
+                 keys_rigid=int(n_keys.sum()))
+    out_track = np.where(wrapped[None, :, None], lay.local, lay.head_local)
+    radius = np.where(wrapped, r_local, r_head)
     band = np.where(wrapped, lay.band, -1)
-    gain = np.where(wrapped, lay.gain, 1.0)
-    keys = keyframes.Keys(np.where(wrapped, kl.mask, kg.mask), np.where(wrapped[:, None], kl.values, kg.values),
-                          np.where(wrapped, kl.first_active, kg.first_active))
-    return Plan(lay.order, out_track, radius, opens, frozenset(closes), band, gain, lay.motions, stats, keys)
+    gain = np.where(wrapped, lay.gain, lay.head.gain)
+    keys = keyframes.Keys(np.where(wrapped, kl.mask, kh.mask), np.where(wrapped[:, None], kl.values, kh.values),
+                          np.where(wrapped, kl.first_active, kh.first_active))
+    return Plan(lay.order, out_track, radius, opens, frozenset(closes), band, gain, lay.motions, stats, keys,
+                lay.head, outer)
 
 
 def compose_tracks(plan_: Plan, local: np.ndarray) -> np.ndarray:
-    """Paths' coordinates (T, P, 6) in their own frames (local in groups) -> viewport px, as played."""
+    """Paths' coordinates (T, P, 6) in their own frames (band or head local) -> viewport px, as played."""
     out = np.array(local, np.float64, copy=True)
-    t = out.shape[0]
-    for b, m in enumerate(plan_.motions):
-        sel = np.flatnonzero(plan_.band == b)
+    t, p = out.shape[:2]
+
+    def apply(m: BandMotion, sel: np.ndarray) -> None:
         pts = out[:, sel].reshape(t, len(sel), 3, 2)
         out[:, sel] = (np.einsum("tij,tpvj->tpvi", m.matrices[:, :, :2], pts)
                        + m.matrices[:, None, None, :, 2]).reshape(t, len(sel), 6)
+
+    for b, m in enumerate(plan_.motions):
+        apply(m, np.flatnonzero(plan_.band == b))
+    if plan_.head is not None:
+        apply(plan_.head, np.arange(p))
     return out
 
 

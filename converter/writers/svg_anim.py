@@ -269,7 +269,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
         from converter import rigid  # rigid 2D motion factored into animated group transforms
 
         plan = rigid.plan_for(sheet, options, tris, active, track, dur)
-        if plan.opens:  # else nothing pays for a group: the plain encoding, byte for byte
+        if plan.head is not None:  # else nothing pays for a group: the plain encoding, byte for byte
             tris, active, track = tris[plan.order], active[:, plan.order], plan.track
         else:
             plan = None
@@ -479,7 +479,7 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
     codes = np.where(active, cls[None, :], -1)
     disc_decimals = int(math.ceil(math.log10(4 * t))) if t > 1 else 1
     v_anims = _discrete("class", codes, names, key_time_strings(t, disc_decimals, discrete=True), dur)
-    out = [_style(palette, view_scale), "<g>"]
+    out = [_style(palette, view_scale), plan.outer if plan is not None else "<g>"]
     ids = path_ids(tris)
     moves = [f' transform="translate({x} {y})"' if x or y else "" for x, y in off.tolist()]
     opens, closes = (plan.opens, plan.closes) if plan is not None else ({}, frozenset())
