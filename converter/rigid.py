@@ -474,11 +474,18 @@ def _motion(xy: np.ndarray, verts: np.ndarray, neutral: int, budget: float, scal
 
 
 def group_open(motion: BandMotion, n_frames: int, dur: str, kt_decimals: int = 4) -> str:
-    """'<g>' plus the band's animateTransform stack (additive sum, in document order) for one run."""
+    """'<g>' plus the band's animateTransform stack (additive sum, in document order) for one run; a static
+    translate on the group takes the median position out of the translate values (shorter numbers)."""
     out = ["<g>"]
     q = 10 ** kt_decimals
     for a in motion.anims:
-        vals = ";".join(" ".join(svg_number(v, a.decimals) for v in row) for row in a.values.tolist())
+        values = a.values
+        if a.kind == "translate" and len(values) > 1:
+            # A static translate on the group holds the typical position; the (summed) animation only the rest.
+            base = np.rint(np.median(values, axis=0)).astype(np.int64)
+            out[0] = f'<g transform="translate({base[0]} {base[1]})">'
+            values = values - base
+        vals = ";".join(" ".join(svg_number(v, a.decimals) for v in row) for row in values.tolist())
         head = f'<animateTransform attributeName="transform" type="{a.kind}" additive="sum" dur="{dur}" '
         if len(a.frames) == 1 or len(a.frames) == n_frames + 1:  # a set, or evenly spaced: no keyTimes
             out.append(f'{head}repeatCount="indefinite" values="{vals}"/>')
