@@ -64,6 +64,7 @@ BAND_SHARE = 0.3  # the same for each band's transform inside the head's (smooth
 HUBER_PX = 1.0  # scale of the robust (Cauchy) weights in the affine fit
 FIT_ITERATIONS = 3
 EVERY_FRAME_SHARE = 0.8  # when keyframing keeps more frames than this share, write every frame (no keyTimes)
+PLAIN_SAMPLE = 4  # the plain key count that decides whether groups pay is estimated on every 4th path
 BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime)
 
 
@@ -110,7 +111,7 @@ class Plan(NamedTuple):
     gain: np.ndarray  # float64 (P,) local -> global error gain of each path (1 when plain)
     motions: tuple[BandMotion, ...]  # per band: the played transform
     stats: dict[str, float]
-    keys: keyframes.Keys  # the keyframes of track within radius (octagon tracks), already reduced here
+    keys: keyframes.Keys | None  # the keyframes of track within radius (octagon tracks); None without groups
     head: BandMotion | None  # the outermost group's transform (None: no groups at all)
     outer: str  # '<g>' and the head's transform stack, opened before the first path
 
@@ -523,10 +524,14 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
     r_head = float(local_radius(tolerance, np.array([lay.head.gain]), scale, time_budget, float_err)[0])
     ok = r_local > 0.05 * global_radius  # a band that magnifies errors too much is not worth it
 
-    def keys_of(x, r):
-        return keyframes.reduce(keyframes.octagon_tracks(x), act, np.maximum(r, 1e-6) * keyframes.OCTAGON, bend=bend)
+    def keys_of(x, r, cols=slice(None)):
+        return keyframes.reduce(keyframes.octagon_tracks(x[:, cols]), act[:, cols],
+                                np.maximum(r, 1e-6) * keyframes.OCTAGON, bend=bend)
 
-    kg, kh, kl = keys_of(glob, global_radius), keys_of(lay.head_local, r_head), keys_of(lay.local, r_local)
+    kh, kl = keys_of(lay.head_local, r_head), keys_of(lay.local, r_local)
+    # The plain encoding's key count only decides whether grouping pays: estimated from every PLAIN_SAMPLE-th path.
+    sample = np.arange(0, p, PLAIN_SAMPLE if p >= 50 * PLAIN_SAMPLE else 1)
+    plain_keys = int(round(keys_of(glob, global_radius, sample).mask.sum() * p / len(sample)))
     saved = (kh.mask.sum(axis=0) - kl.mask.sum(axis=0)) * BYTES_PER_KEY
     opens: dict[int, str] = {}
     closes = set()
@@ -542,12 +547,12 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
     n_keys = np.where(wrapped, kl.mask.sum(0), kh.mask.sum(0))
     grouped_cost = int(n_keys.sum()) * BYTES_PER_KEY + len(outer) + sum(len(texts[int(lay.band[a])]) for a in opens)
     stats = {"bands": len(lay.motions), "runs": len(lay.runs) - 1, "groups": len(opens),
-             "grouped_paths": int(wrapped.sum()), "keys_global": int(kg.mask.sum()),
+             "grouped_paths": int(wrapped.sum()), "keys_global": plain_keys,
              "max_gain": float(max(lay.gain.max(), lay.head.gain)) if p else 1.0}
-    if grouped_cost >= int(kg.mask.sum()) * BYTES_PER_KEY:  # the plain encoding is shorter: no groups
-        stats.update(groups=0, grouped_paths=0, transform_bytes=0, keys_rigid=int(kg.mask.sum()))
+    if grouped_cost >= plain_keys * BYTES_PER_KEY:  # the plain encoding is shorter: no groups
+        stats.update(groups=0, grouped_paths=0, transform_bytes=0, keys_rigid=plain_keys)
         return Plan(lay.order, glob, np.full(p, global_radius), {}, frozenset(), np.full(p, -1), np.ones(p),
-                    lay.motions, stats, kg, None, "<g>")
+                    lay.motions, stats, None, None, "<g>")
     stats.update(transform_bytes=len(outer) + sum(len(texts[int(lay.band[a])]) for a in opens),
                  keys_rigid=int(n_keys.sum()))
     out_track = np.where(wrapped[None, :, None], lay.local, lay.head_local)
