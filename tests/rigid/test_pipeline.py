@@ -35,6 +35,19 @@ def test_rigid_output_verifies_and_is_smaller(anim, outputs):
     assert len(rigid.data) < 0.8 * len(plain.data)
 
 
+def test_head_group_wraps_every_path_and_bands_nest_inside(outputs):
+    from lxml import etree
+
+    root = etree.fromstring(outputs[True].data)
+    ns = "{http://www.w3.org/2000/svg}"
+    (head,) = [g for g in root if g.tag == f"{ns}g"]  # one top-level group: the head's
+    assert head.find(f"{ns}animateTransform") is not None
+    assert len(list(head.iter(f"{ns}path"))) == len(list(root.iter(f"{ns}path")))
+    bands = [g for g in head if g.tag == f"{ns}g"]
+    assert bands and all(g.find(f"{ns}animateTransform") is not None for g in bands)
+    assert all(g.find(f"{ns}g") is None for g in bands)  # two levels, no more
+
+
 def test_verifier_catches_a_wrong_group_transform(anim, outputs):
     data = outputs[True].data
     i = data.index(b'type="rotate"')
