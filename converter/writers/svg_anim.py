@@ -34,6 +34,7 @@ FORMAT_VERSION = 2
 STROKE_PX = 0.5  # stroke of the fill colour hides anti-aliasing seams between neighbours
 COLOR_TOLERANCE = 3.0  # 8-bit levels per channel a shown colour may differ from the exact flat shade
 COLOR_TIME_LEVELS = 0.1  # of which rounding the colour keyTimes may take
+COLOR_SLACK = 0.05  # levels kept free of evenly spaced colour keys (checked exactly, rounding included)
 QUANT_SHARE = 0.2  # share of the tolerance spent on integer rounding (the rest on keyframes)
 TIME_SHARE = 0.015  # share of the tolerance spent on rounding keyTimes
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
@@ -295,9 +296,7 @@ def raw_values_bytes(track: np.ndarray) -> int:
     """Exact bytes of the raw encoding's d values for tracks (T, P, 6) px: every frame plus the held last,
     'M x,y L x,y L x,y Z' with 2 decimals, ';' between (the bulk of a raw file; counted, not written)."""
     c = np.rint(track * 100).astype(np.int64)
-    a = np.abs(c) // 100
-    digits = 1 + np.searchsorted(10 ** np.arange(1, 19, dtype=np.int64), a, side="right")
-    per_value = (digits + 3 + (c < 0)).sum(axis=2) + 7 + 1  # numbers, M L L Z and 3 commas, ';'
+    per_value = (_digits(np.abs(c) // 100) + 3 + (c < 0)).sum(axis=2) + 7 + 1  # numbers, M L L Z, 3 commas, ';'
     t, p = track.shape[:2]
     return int(per_value.sum() + per_value[-1].sum() - p)
 
@@ -463,7 +462,7 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
                                        c_vary)
     c_len = np.array([len(a) for a in c_anims])
     n_uniform += _uniform_instead("color", sheet.face_rgb[:, tris].astype(np.float64) * 255, active,
-                                  ckeys.mask.sum(axis=0), c_len, np.full(p, 7.0), 1.0, color_tol - 0.05, False,
+                                  ckeys.mask.sum(axis=0), c_len, np.full(p, 7.0), 1.0, color_tol - COLOR_SLACK, False,
                                   lambda v, j: _hex(np.clip(v, 0, 255)).tolist(), dur, c_anims)
     cbounds = np.searchsorted(cpk, np.arange(p + 1))[:-1]
     packed = (crow[:, 0] << 16) | (crow[:, 1] << 8) | crow[:, 2]
