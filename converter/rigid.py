@@ -208,12 +208,14 @@ def fit_affine(ref: np.ndarray, xy: np.ndarray) -> np.ndarray:
         out[:, :, 2] = xy.mean(axis=1) - ref.mean(axis=0)
         return out
     d = np.c_[ref, np.ones(n)]  # (n, 3)
+    dd = (d[:, :, None] * d[:, None, :]).reshape(n, 9)
     w = np.ones((t, n))
     for _ in range(FIT_ITERATIONS):
-        m = np.einsum("tn,ni,nj->tij", w, d, d)  # weighted normal equations per frame
-        b = np.einsum("tn,ni,tnc->tic", w, d, xy)
+        m = (w @ dd).reshape(t, 3, 3)  # weighted normal equations per frame (matrix products, not einsum: faster)
+        b = d.T @ (w[:, :, None] * xy)
         sol = np.linalg.solve(m + 1e-9 * np.eye(3), b)  # (T, 3, 2)
-        r = np.linalg.norm(np.einsum("ni,tic->tnc", d, sol) - xy, axis=-1)
+        diff = d @ sol - xy
+        r = np.sqrt(diff[..., 0] ** 2 + diff[..., 1] ** 2)
         w = 1.0 / (1.0 + (r / HUBER_PX) ** 2)  # Cauchy weights: moving lips and jaw barely pull the fit
     return np.swapaxes(sol, 1, 2)
 
@@ -269,19 +271,22 @@ def band_motion(params: np.ndarray, center: np.ndarray, radius: float, budget: f
     played = np.tile(identity, (t, 1))
     frames_t = np.arange(t)
     q = 10 ** kt_decimals
-    for kind, cols in groups.items():
+    tracks = np.zeros((t, len(groups), 2))  # every parameter group keyed in one pass (1-D ones padded with 0)
+    for i, cols in enumerate(groups.values()):
+        tracks[:, i, :len(cols)] = params[:, cols] / eps[cols]
+    keys = keyframes.reduce(tracks, np.ones((t, len(groups)), bool), 1.0)
+    for i, (kind, cols) in enumerate(groups.items()):
         x = params[:, cols]
         if kind != "translate" and np.abs(x - identity[cols]).max() <= eps[cols[0]]:
             continue  # the identity explains it: no animation
-        keys = keyframes.reduce((x / eps[cols])[:, None, :], np.ones((t, 1), bool), 1.0)
-        kf = np.flatnonzero(keys.mask[:, 0])
+        kf = np.flatnonzero(keys.mask[:, i])
         unit = scale if kind == "translate" else 1.0  # translate is written in viewBox units
         dec = _decimals(rounding[kind] * unit)
         if len(kf) > EVERY_FRAME_SHARE * (t + 1):  # jitter keeps nearly every frame: all, without keyTimes
             kf = np.arange(t + 1)
             vals = np.round(np.vstack([x, x[-1:]]) * unit, dec)
         else:
-            vals = np.round(keys.values[kf, 0] * eps[cols] * unit, dec)
+            vals = np.round(keys.values[kf, i, :len(cols)] * eps[cols] * unit, dec)
         if len(kf) == 2 and np.array_equal(vals[0], vals[1]):  # constant: one value plays as a set
             kf, vals = kf[:1], vals[:1]
         kt = kf / t if len(kf) == t + 1 else np.rint(kf * q / t) / q  # every frame: no keyTimes written
@@ -325,12 +330,19 @@ def _cell_pairs(lo: np.ndarray, hi: np.ndarray, cell: float) -> np.ndarray:
 def apart(pa: np.ndarray, pb: np.ndarray, margin: float) -> np.ndarray:
     """Bool (...): triangles pa, pb (..., 3, 2) are more than margin apart along one of their 6 edge normals
     (a separating-axis test; False may still mean apart, never the reverse)."""
-    e = np.concatenate([np.roll(pa, -1, axis=-2) - pa, np.roll(pb, -1, axis=-2) - pb], axis=-2)  # (..., 6, 2)
-    nx, ny = -e[..., 1], e[..., 0]
-    ax = nx[..., None] * pa[..., None, :, 0] + ny[..., None] * pa[..., None, :, 1]  # (..., 6, 3) projections
-    bx = nx[..., None] * pb[..., None, :, 0] + ny[..., None] * pb[..., None, :, 1]
-    gap = np.maximum(bx.min(axis=-1) - ax.max(axis=-1), ax.min(axis=-1) - bx.max(axis=-1))
-    return (gap > margin * np.sqrt(nx * nx + ny * ny)).any(axis=-1)
+    # Written out per vertex and per axis: numpy reductions over axes of length 3 or 6 are far slower.
+    out = np.zeros(pa.shape[:-2], bool)
+    for tri in (pa, pb):
+        for i in range(3):
+            ex, ey = tri[..., (i + 1) % 3, 0] - tri[..., i, 0], tri[..., (i + 1) % 3, 1] - tri[..., i, 1]
+            nx, ny = -ey, ex
+            a = [nx * pa[..., k, 0] + ny * pa[..., k, 1] for k in range(3)]
+            b = [nx * pb[..., k, 0] + ny * pb[..., k, 1] for k in range(3)]
+            a_lo, a_hi = np.minimum(np.minimum(a[0], a[1]), a[2]), np.maximum(np.maximum(a[0], a[1]), a[2])
+            b_lo, b_hi = np.minimum(np.minimum(b[0], b[1]), b[2]), np.maximum(np.maximum(b[0], b[1]), b[2])
+            gap = np.maximum(b_lo - a_hi, a_lo - b_hi)
+            out |= gap > margin * np.sqrt(nx * nx + ny * ny)
+    return out
 
 
 def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP_BLOCK,
@@ -372,7 +384,9 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP
         flo, fhi = pts.min(axis=2), pts.max(axis=2)  # per-frame boxes (B, n, 2)
         for c0 in range(0, len(glob), PAIR_CHUNK):
             sa, sb = la[c0:c0 + PAIR_CHUNK], lb[c0:c0 + PAIR_CHUNK]
-            near = (np.maximum(flo[:, sa], flo[:, sb]) <= np.minimum(fhi[:, sa], fhi[:, sb]) + margin).all(axis=-1)
+            lo_a, lo_b, hi_a, hi_b = flo[:, sa], flo[:, sb], fhi[:, sa], fhi[:, sb]
+            near = ((np.maximum(lo_a[..., 0], lo_b[..., 0]) <= np.minimum(hi_a[..., 0], hi_b[..., 0]) + margin)
+                    & (np.maximum(lo_a[..., 1], lo_b[..., 1]) <= np.minimum(hi_a[..., 1], hi_b[..., 1]) + margin))
             fi, mi = np.nonzero(on[:, sa] & on[:, sb] & near)
             meet = np.zeros(len(sa), bool)
             meet[mi[~apart(pts[fi, sa[mi]], pts[fi, sb[mi]], margin)]] = True
