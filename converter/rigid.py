@@ -368,7 +368,7 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP
         on = act[:, idx]
         lo = np.where(on[:, :, None, None], pts, np.inf).min(axis=(0, 2)) - margin / 2
         hi = np.where(on[:, :, None, None], pts, -np.inf).max(axis=(0, 2)) + margin / 2
-        cell = max(2.0 * float(np.median((hi - lo).max(axis=1))), 1.0)
+        cell = max(1.5 * float(np.median((hi - lo).max(axis=1))), 1.0)
         pairs = _cell_pairs(lo, hi, cell)
         if band is not None:  # most neighbours share a band: drop them before any test
             pairs = pairs[band[idx[pairs[:, 0]]] != band[idx[pairs[:, 1]]]]
