@@ -336,13 +336,16 @@ def apart(pa: np.ndarray, pb: np.ndarray, margin: float) -> np.ndarray:
         for i in range(3):
             ex, ey = tri[..., (i + 1) % 3, 0] - tri[..., i, 0], tri[..., (i + 1) % 3, 1] - tri[..., i, 1]
             nx, ny = -ey, ex
-            a = [nx * pa[..., k, 0] + ny * pa[..., k, 1] for k in range(3)]
-            b = [nx * pb[..., k, 0] + ny * pb[..., k, 1] for k in range(3)]
-            a_lo, a_hi = np.minimum(np.minimum(a[0], a[1]), a[2]), np.maximum(np.maximum(a[0], a[1]), a[2])
-            b_lo, b_hi = np.minimum(np.minimum(b[0], b[1]), b[2]), np.maximum(np.maximum(b[0], b[1]), b[2])
+            (a_lo, a_hi), (b_lo, b_hi) = _span(pa, nx, ny), _span(pb, nx, ny)
             gap = np.maximum(b_lo - a_hi, a_lo - b_hi)
             out |= gap > margin * np.sqrt(nx * nx + ny * ny)
     return out
+
+
+def _span(tri: np.ndarray, nx: np.ndarray, ny: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lowest and highest projection of triangles tri (..., 3, 2) on the axes (nx, ny) (...)."""
+    p0, p1, p2 = (nx * tri[..., k, 0] + ny * tri[..., k, 1] for k in range(3))
+    return np.minimum(np.minimum(p0, p1), p2), np.maximum(np.maximum(p0, p1), p2)
 
 
 def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP_BLOCK,
