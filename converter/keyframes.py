@@ -15,9 +15,9 @@ The first key sits at time 0 holding the value of the first active frame; the la
 keyTimes end at 1) and its value is free: any velocity in the final box extrapolates to a valid end, and zero
 velocity is preferred, so a track that never moves beyond ``eps`` comes out as two equal keys (static).
 
-A Euclidean bound r on 2D points is met by giving each point two coordinate pairs, (x, y) and the same
-rotated by 45 degrees, each bounded by r cos(22.5 deg): the intersection of the two boxes is the regular
-octagon inscribed in the circle of radius r (see ``octagon_tracks``).
+Keys on sampled values are what the transform stacks and the exact (``--raw``) encoding need. Paths' vertices
+and colours use ``converter.freeknots`` instead, whose key values are free within the bound (fewer keys);
+``point_keys`` turns a Euclidean bound on 2D points into its per-coordinate one.
 """
 
 from __future__ import annotations
@@ -36,12 +36,8 @@ class Keys(NamedTuple):
     first_active: np.ndarray  # int (N,): first active frame, -1 when the track is never active
 
 
-def reduce(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray, bend: bool = False) -> Keys:
-    """Greedy keys for tracks x (T, N, D) so linear interpolation stays within eps per coordinate where active.
-
-    bend=True (x from octagon_tracks): an interior key moves off the data by up to eps against the local
-    curvature when the segment allows it, so the next chord can run longer (free knots, roughly sqrt 2 longer
-    segments on smooth motion)."""
+def reduce(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray) -> Keys:
+    """Greedy keys on sampled values for tracks x (T, N, D), within eps per coordinate where active."""
     x = np.asarray(x, np.float64)
     t, n, d = x.shape
     active = np.asarray(active, bool)
@@ -75,8 +71,6 @@ def reduce(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray, bend: boo
             idx = np.flatnonzero(cut)
             kt = last_t[idx]
             end = x[kt, idx]
-            if bend:
-                end = _bent_end(x, idx, kt, end, eps[idx], start_t[idx], start_v[idx], lo[idx], hi[idx])
             mask[kt, idx] = True
             values[kt, idx] = end
             start_t[idx] = kt
@@ -123,37 +117,12 @@ def interpolate(keys: Keys, frames: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
-OCTAGON = math.cos(math.pi / 8)  # per-axis bound on (x, y) and 45-degree axes for a Euclidean radius of 1
+def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray) -> Keys:
+    """Free-knot keys for tracks of 2D points xy (T, N, 2m), each point within Euclidean radius where active."""
+    from converter.freeknots import reduce_free
 
-
-def octagon_tracks(xy: np.ndarray) -> np.ndarray:
-    """Tracks (T, N, 2m) of m 2D points -> (T, N, 4m): the points plus the points rotated by 45 degrees."""
-    pts = xy.reshape(xy.shape[:-1] + (-1, 2))
-    rot = np.stack([pts[..., 0] + pts[..., 1], pts[..., 0] - pts[..., 1]], axis=-1) / math.sqrt(2)
-    return np.concatenate([xy, rot.reshape(xy.shape)], axis=-1)
-
-
-def _bent_end(x: np.ndarray, idx: np.ndarray, kt: np.ndarray, end: np.ndarray, eps: np.ndarray,
-              s_t: np.ndarray, s_v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Key values moved against the curvature (octagon tracks), where the current segment still allows it."""
-    t, _, d = x.shape
-    half = d // 2
-    prev = x[np.maximum(kt - 1, 0), idx, :half]
-    nxt = x[np.minimum(kt + 1, t - 1), idx, :half]
-    acc = (prev + nxt - 2 * end[:, :half]).reshape(len(idx), -1, 2)
-    norm = np.linalg.norm(acc, axis=-1, keepdims=True)
-    unit = np.where(norm > 1e-9, acc / np.where(norm > 0, norm, 1), 0.0)
-    span = (kt - s_t)[:, None].astype(np.float64)
-    out = end.copy()
-    todo = np.ones(len(idx), bool)
-    for frac in (0.95, 0.5):
-        off = (-frac * eps[:, :1, None] * unit).reshape(len(idx), half)
-        cand = octagon_tracks((end[:, :half] + off)[None])[0]
-        v = (cand - s_v) / span
-        ok = todo & ((v >= lo) & (v <= hi)).all(axis=1)
-        out[ok] = cand[ok]
-        todo &= ~ok
-    return out
+    # Per coordinate: the square inscribed in each point's circle.
+    return reduce_free(xy, active, np.asarray(radius, np.float64) * math.sqrt(0.5))
 
 
 def _hat(n_frames: int, n_keys: int):

@@ -111,7 +111,7 @@ class Plan(NamedTuple):
     gain: np.ndarray  # float64 (P,) local -> global error gain of each path (1 when plain)
     motions: tuple[BandMotion, ...]  # per band: the played transform
     stats: dict[str, float]
-    keys: keyframes.Keys | None  # the keyframes of track within radius (octagon tracks); None without groups
+    keys: keyframes.Keys | None  # the keyframes of track within radius (keyframes.point_keys); None without groups
     head: BandMotion | None  # the outermost group's transform (None: no groups at all)
     outer: str  # '<g>' and the head's transform stack, opened before the first path
 
@@ -525,7 +525,7 @@ def local_radius(tolerance: float, gain: np.ndarray, scale: int, time_budget: fl
 def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
          tris: np.ndarray, active: np.ndarray, track: np.ndarray, tolerance: float, scale: int,
          time_budget: float, float_err: float, global_radius: float, dur: str,
-         head_clusters: int = HEAD_CLUSTERS, merge_runs: bool = True, bend: bool = False) -> Plan:
+         head_clusters: int = HEAD_CLUSTERS, merge_runs: bool = True) -> Plan:
     """Rigid layout for the bounded encoder: the head group around everything, which runs of paths go under a
     band's group inside it, and their tracks.
 
@@ -542,8 +542,7 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
     ok = r_local > 0.05 * global_radius  # a band that magnifies errors too much is not worth it
 
     def keys_of(x, r, cols=slice(None)):
-        return keyframes.reduce(keyframes.octagon_tracks(x[:, cols]), act[:, cols],
-                                np.maximum(r, 1e-6) * keyframes.OCTAGON, bend=bend)
+        return keyframes.point_keys(x[:, cols], act[:, cols], np.broadcast_to(np.maximum(r, 1e-6), (p,))[cols])
 
     kh, kl = keys_of(lay.head_local, r_head), keys_of(lay.local, r_local)
     # The plain encoding's key count only decides whether grouping pays: estimated from every PLAIN_SAMPLE-th path.
@@ -609,4 +608,4 @@ def plan_for(sheet, options, tris: np.ndarray, active: np.ndarray, track: np.nda
     float_err = 1e-4 + 2e-7 * max(sheet.camera.width, sheet.camera.height)  # as svg_anim._encode_keyed
     radius = tol - math.sqrt(0.5) / scale - time_budget - float_err
     return plan(sheet.xy, sheet.faces, sheet.part_ids, sheet.neutral, tris, active, track, tol, scale,
-                time_budget, float_err, radius, dur, bend=True)
+                time_budget, float_err, radius, dur)

@@ -8,8 +8,8 @@ Three encodings of the same document structure:
   runs where a visible triangle does not move merged, placed with keyTimes (exact to 2 decimals); a path keeps
   every frame where keyTimes would cost more (the chapter's own remark on long dynamic sequences).
 - ``bounded`` (default): per path only the keys needed so SMIL's linear interpolation stays within
-  options.tolerance px of the exact projection at every frame where the triangle is visible (converter.keyframes:
-  greedy keys with keyTimes, or evenly spaced keys without them where that is shorter); integer coordinates in a
+  options.tolerance px of the exact projection at every frame where the triangle is visible (converter.freeknots:
+  greedy keys with free values and keyTimes, or evenly spaced keys without them where that is shorter); integer coordinates in a
   viewBox scaled so rounding is part of the same budget; relative path syntax; static triangles without
   <animate>; fill and stroke are currentColor, the colour keyed linearly within COLOR_TOLERANCE levels and its
   first value a shared CSS class; visibility a discrete class animation; never-visible triangles dropped.
@@ -26,6 +26,7 @@ from xml.sax.saxutils import escape
 import numpy as np
 
 from converter import depth, keyframes
+from converter.freeknots import reduce_free
 from converter.options import ConversionOptions, Report
 from converter.sheet import Sheet
 from converter.svgtext import number as svg_number
@@ -35,7 +36,7 @@ STROKE_PX = 0.5  # stroke of the fill colour hides anti-aliasing seams between n
 COLOR_TOLERANCE = 3.0  # 8-bit levels per channel a shown colour may differ from the exact flat shade
 COLOR_TIME_LEVELS = 0.1  # of which rounding the colour keyTimes may take
 COLOR_SLACK = 0.05  # levels kept free of evenly spaced colour keys (checked exactly, rounding included)
-QUANT_SHARE = 0.2  # share of the tolerance spent on integer rounding (the rest on keyframes)
+QUANT_SHARE = 0.25  # share of the tolerance spent on integer rounding (the rest on keyframes)
 TIME_SHARE = 0.015  # share of the tolerance spent on rounding keyTimes
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
 HIDDEN_CLASS = "h"
@@ -232,7 +233,8 @@ def color_keys(rgb: np.ndarray, active: np.ndarray, tolerance: float) -> keyfram
     """Colour (T, P, 3) in 0..1 as linear keys within tolerance 8-bit levels per channel where shown (values
     rounded to integer levels, which the tolerance includes)."""
     levels = np.asarray(rgb, np.float64) * 255
-    keys = keyframes.reduce(levels, active, max(tolerance - 0.5 - COLOR_TIME_LEVELS, 1e-6))  # rounding, keyTimes
+    eps = max(tolerance - 0.5 - COLOR_TIME_LEVELS, 1e-6)  # rounding, keyTimes
+    keys = reduce_free(levels, active, eps)
     q = np.clip(np.rint(keys.values), 0, 255)
     return keys._replace(values=q)
 
@@ -430,7 +432,7 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
     if plan is not None:  # the plan reduced these tracks to decide its groups: the same keys
         keys = plan.keys
     else:
-        keys = keyframes.reduce(keyframes.octagon_tracks(track), active, radius * keyframes.OCTAGON, bend=True)
+        keys = keyframes.point_keys(track, active, radius)
     q = np.rint(keys.values[..., :6] * view_scale).astype(np.int64)
     pk, fk = np.nonzero(keys.mask.T)
     rows = q.transpose(1, 0, 2)[pk, fk]

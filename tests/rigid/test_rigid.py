@@ -120,12 +120,12 @@ def _plan(sheet, tol, **kw):
 def test_composed_error_within_tolerance(sheet, tol):
     plan, act, track, scale, _ = _plan(sheet, tol)
     act = act[:, plan.order]
-    keys = keyframes.reduce(keyframes.octagon_tracks(plan.track), act, plan.radius * keyframes.OCTAGON)
-    q = np.rint(keys.values[..., :6] * scale) / scale  # what the file holds (integer viewBox units)
+    keys = keyframes.point_keys(plan.track, act, plan.radius)
+    q = np.rint(keys.values * scale) / scale  # what the file holds (integer viewBox units)
     played = keyframes.interpolate(keyframes.Keys(keys.mask, q, keys.first_active))
     err = np.linalg.norm((rigid.compose_tracks(plan, played) - track[:, plan.order]).reshape(*act.shape, 3, 2),
                          axis=-1)
-    assert plan.stats["groups"] >= 1 and plan.stats["grouped_paths"] > 0.5 * act.shape[1]
+    assert plan.stats["groups"] >= 1 and plan.stats["grouped_paths"] > 0.25 * act.shape[1]
     assert err.max(axis=-1)[act].max() <= tol * (1 - 0.03)  # keyTimes rounding keeps its own share
     assert plan.stats["keys_rigid"] < 0.75 * plan.stats["keys_global"]
 

@@ -44,17 +44,3 @@ def test_hidden_frames_are_free_and_static_tracks_keep_two_equal_keys():
 def test_never_active_track_has_no_keys():
     keys = kf.reduce(np.ones((10, 1, 2)), np.zeros((10, 1), bool), 0.1)
     assert not keys.mask.any() and keys.first_active[0] == -1
-
-
-def test_octagon_bend_keeps_euclidean_bound():
-    rng = np.random.default_rng(5)
-    t = np.arange(150)[:, None, None]
-    pts = 40 * np.sin(t / rng.uniform(5, 30, (1, 30, 6)) + rng.uniform(0, 6, (1, 30, 6)))
-    active = rng.random((150, 30)) > 0.1
-    r = 0.2
-    keys = kf.reduce(kf.octagon_tracks(pts), active, r * kf.OCTAGON, bend=True)
-    y = kf.interpolate(keys._replace(values=keys.values[..., :6]))
-    err = np.linalg.norm((y - pts).reshape(150, 30, 3, 2), axis=-1).max(axis=-1)
-    assert err[active].max() <= r + 1e-9
-    plain = kf.reduce(kf.octagon_tracks(pts), active, r * kf.OCTAGON, bend=False)
-    assert keys.mask.sum() < plain.mask.sum()  # free knots need fewer keys

@@ -1,0 +1,221 @@
+"""Free-knot keyframe reduction: key values anywhere within the bound, so each straight segment runs longer.
+
+``keyframes.reduce`` puts every key on a sampled value. Here a key's value is free: the segment from key j
+(time s, value p) with velocity v passes within eps of active frame k iff ``|p + v (k - s) - x_k| <= eps``, a
+strip in the (p, v) plane, one plane per coordinate. The greedy keeps, per coordinate, the convex polygon of
+(p, v) that meets every active frame since s, with p restricted to the window of values key j can take given
+the keys before it. When the next active frame would empty a polygon, the last active frame becomes key j+1 and
+its window is the range of p + v (k - s) over the polygon. A backward pass then picks the values: the end key
+with the smallest velocity (zero when the last segment allows it, so a track that never leaves eps is two equal
+keys), and each earlier key in the middle of what its segment allows. Per coordinate this is the classic
+window-propagating greedy for continuous piecewise-linear fitting under a max-norm bound; it needs about a
+fifth fewer keys than sampled keys on captured motion (bench_capture).
+
+The loops do not vectorise (polygons grow and shrink per track), so they are compiled with numba.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numba
+import numpy as np
+
+BIG = 1e7  # bound of the unconstrained first value and of every velocity (px, px/frame)
+MAX_VERTS = 40  # polygon capacity; a segment whose polygon would outgrow it is cut early (still valid)
+THREADS = max(1, min(4, os.cpu_count() or 1))
+_SLACK = 1e-9  # relative tolerance of the final check: violating tracks are rebuilt with sampled keys
+
+
+@numba.njit(cache=True, nogil=True)
+def _clip(src, n, a, b, c, dst) -> int:
+    """Convex polygon src[:n] (points (p, v)) cut to a*p + b*v <= c, into dst; returns its vertex count."""
+    m = 0
+    for i in range(n):
+        j = i + 1 if i + 1 < n else 0
+        si = a * src[i, 0] + b * src[i, 1] - c
+        sj = a * src[j, 0] + b * src[j, 1] - c
+        if si <= 0.0:
+            if m < dst.shape[0]:
+                dst[m, 0] = src[i, 0]
+                dst[m, 1] = src[i, 1]
+            m += 1
+        if (si <= 0.0) != (sj <= 0.0):
+            f = si / (si - sj)
+            if m < dst.shape[0]:
+                dst[m, 0] = src[i, 0] + f * (src[j, 0] - src[i, 0])
+                dst[m, 1] = src[i, 1] + f * (src[j, 1] - src[i, 1])
+            m += 1
+    return m
+
+
+@numba.njit(cache=True, nogil=True)
+def _strip(src, n, tau, lo, hi, tmp, dst) -> int:
+    """Polygon src[:n] cut to lo <= p + tau v <= hi, into dst (tmp is scratch); 0 when empty."""
+    m = _clip(src, n, 1.0, tau, hi, tmp)
+    if m == 0 or m > tmp.shape[0]:
+        return 0 if m == 0 else dst.shape[0] + 1
+    return _clip(tmp, m, -1.0, -tau, -lo, dst)
+
+
+@numba.njit(cache=True, nogil=True)
+def _rect(dst, lo, hi) -> int:
+    dst[0, 0], dst[0, 1] = lo, -BIG
+    dst[1, 0], dst[1, 1] = hi, -BIG
+    dst[2, 0], dst[2, 1] = hi, BIG
+    dst[3, 0], dst[3, 1] = lo, BIG
+    return 4
+
+
+@numba.njit(cache=True, nogil=True)
+def _on_line(poly, n, span, y) -> float:
+    """A p with (p, v) in the polygon and p + span v = y: the middle of that chord (nearest vertex if missed)."""
+    lo, hi = np.inf, -np.inf
+    best, best_g = 0.0, np.inf
+    for i in range(n):
+        j = i + 1 if i + 1 < n else 0
+        gi = poly[i, 0] + span * poly[i, 1] - y
+        gj = poly[j, 0] + span * poly[j, 1] - y
+        if abs(gi) < best_g:
+            best_g, best = abs(gi), poly[i, 0] - gi  # shift p so the line is met exactly
+        if gi == 0.0:
+            lo, hi = min(lo, poly[i, 0]), max(hi, poly[i, 0])
+        elif (gi < 0.0) != (gj < 0.0) and gj != 0.0:
+            p = poly[i, 0] + gi / (gi - gj) * (poly[j, 0] - poly[i, 0])
+            lo, hi = min(lo, p), max(hi, p)
+    return 0.5 * (lo + hi) if lo <= hi else best
+
+
+@numba.njit(cache=True, nogil=True)
+def _slowest(poly, n):
+    """The (p, v) of the polygon with the smallest |v|: on v = 0 (middle of that chord) when it crosses it."""
+    lo, hi = np.inf, -np.inf
+    bp, bv = poly[0, 0], poly[0, 1]
+    for i in range(n):
+        j = i + 1 if i + 1 < n else 0
+        vi, vj = poly[i, 1], poly[j, 1]
+        if abs(vi) < abs(bv):
+            bp, bv = poly[i, 0], vi
+        if vi == 0.0:
+            lo, hi = min(lo, poly[i, 0]), max(hi, poly[i, 0])
+        elif (vi < 0.0) != (vj < 0.0) and vj != 0.0:
+            p = poly[i, 0] + vi / (vi - vj) * (poly[j, 0] - poly[i, 0])
+            lo, hi = min(lo, p), max(hi, p)
+    if lo <= hi:
+        return 0.5 * (lo + hi), 0.0
+    return bp, bv
+
+
+@numba.njit(cache=True, nogil=True)
+def _advance(poly, cnt, tau, xk, e, tmp, nxt, ncnt) -> bool:
+    """Every coordinate's polygon cut by frame k's strip into nxt; False when one empties or outgrows MAX_VERTS."""
+    for c in range(poly.shape[0]):
+        ncnt[c] = _strip(poly[c], cnt[c], tau, xk[c] - e, xk[c] + e, tmp, nxt[c])
+        if ncnt[c] == 0 or ncnt[c] > MAX_VERTS - 4:
+            return False
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _reduce(x, active, eps, mask, values, bad, first, stop):
+    """Free-knot keys of tracks first..stop-1 into mask and values; bad marks tracks that need sampled keys."""
+    t, n, d = x.shape
+    poly = np.empty((d, MAX_VERTS, 2))
+    nxt = np.empty((d, MAX_VERTS, 2))
+    cnt = np.empty(d, np.int64)
+    ncnt = np.empty(d, np.int64)
+    tmp = np.empty((MAX_VERTS, 2))
+    seg_t = np.empty(t + 1, np.int64)
+    seg_poly = np.empty((t + 1, d, MAX_VERTS, 2))
+    seg_cnt = np.empty((t + 1, d), np.int64)
+    for j in range(first, stop):
+        e = eps[j]
+        s = 0
+        last = -1
+        nseg = 0
+        for c in range(d):
+            cnt[c] = _rect(poly[c], -BIG, BIG)
+        for k in range(t):
+            if not active[k, j]:
+                continue
+            if not _advance(poly, cnt, k - s, x[k, j], e, tmp, nxt, ncnt):
+                if last <= s:
+                    bad[j] = True
+                    continue
+                # The last active frame becomes a key; its window is where the segment can end.
+                seg_t[nseg] = s
+                span = last - s
+                for c in range(d):
+                    seg_cnt[nseg, c] = cnt[c]
+                    seg_poly[nseg, c, :cnt[c]] = poly[c, :cnt[c]]
+                    lo, hi = np.inf, -np.inf
+                    for i in range(cnt[c]):
+                        y = poly[c, i, 0] + span * poly[c, i, 1]
+                        lo, hi = min(lo, y), max(hi, y)
+                    cnt[c] = _rect(poly[c], lo, hi)
+                nseg += 1
+                s = last
+                if not _advance(poly, cnt, k - s, x[k, j], e, tmp, nxt, ncnt):
+                    bad[j] = True  # cannot happen with a free velocity: safety net only
+                    continue
+            poly, nxt = nxt, poly
+            cnt, ncnt = ncnt, cnt
+            last = k
+        if last < 0:
+            continue  # never active: no keys
+        seg_t[nseg] = s
+        for c in range(d):
+            seg_cnt[nseg, c] = cnt[c]
+            seg_poly[nseg, c, :cnt[c]] = poly[c, :cnt[c]]
+        nseg += 1
+        # Backward: the loop-end key with the slowest last segment, then each key mid-way along its chord.
+        mask[t, j] = True
+        for c in range(d):
+            p, v = _slowest(seg_poly[nseg - 1, c], seg_cnt[nseg - 1, c])
+            values[t, j, c] = p + v * (t - seg_t[nseg - 1])
+            values[seg_t[nseg - 1], j, c] = p
+        mask[seg_t[nseg - 1], j] = True
+        for i in range(nseg - 2, -1, -1):
+            mask[seg_t[i], j] = True
+            span = seg_t[i + 1] - seg_t[i]
+            for c in range(d):
+                values[seg_t[i], j, c] = _on_line(seg_poly[i, c], seg_cnt[i, c], span, values[seg_t[i + 1], j, c])
+        # The bound, checked on what was built (numerical safety net).
+        i = 0
+        for k in range(t):
+            while i + 1 < nseg and seg_t[i + 1] <= k:
+                i += 1
+            if not active[k, j]:
+                continue
+            a = seg_t[i]
+            b = seg_t[i + 1] if i + 1 < nseg else t
+            f = (k - a) / (b - a)
+            for c in range(d):
+                y = values[a, j, c] + f * (values[b, j, c] - values[a, j, c])
+                if abs(y - x[k, j, c]) > e * (1.0 + _SLACK) + 1e-9:
+                    bad[j] = True
+
+
+def reduce_free(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray):
+    """Keys (keyframes.Keys) for tracks x (T, N, D) within eps per coordinate where active, with free key values."""
+    from converter import keyframes
+
+    x = np.ascontiguousarray(x, np.float64)
+    t, n, d = x.shape
+    active = np.ascontiguousarray(active, bool)
+    eps = np.ascontiguousarray(np.broadcast_to(np.asarray(eps, np.float64), (n,)))
+    mask = np.zeros((t + 1, n), bool)
+    values = np.zeros((t + 1, n, d))
+    bad = np.zeros(n, bool)
+    if n and t:
+        # Two threads (the compiled loop releases the GIL) over halves of the tracks.
+        bounds = np.linspace(0, n, THREADS + 1).astype(np.int64)
+        with ThreadPoolExecutor(THREADS) as pool:
+            list(pool.map(lambda i: _reduce(x, active, eps, mask, values, bad, bounds[i], bounds[i + 1]),
+                          range(THREADS)))
+    first = np.where(active.any(axis=0), np.argmax(active, axis=0), -1)
+    if bad.any():  # numerically awkward tracks: sampled keys, always valid
+        fb = keyframes.reduce(x[:, bad], active[:, bad], eps[bad])
+        mask[:, bad], values[:, bad] = fb.mask, fb.values
+    return keyframes.Keys(mask, values, first)

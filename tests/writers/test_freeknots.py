@@ -1,0 +1,76 @@
+"""Free-knot keys: the bound holds where active, fewer keys than sampled keys, still tracks stay two equal keys."""
+
+import numpy as np
+import pytest
+
+from converter import freeknots
+from converter import keyframes as kf
+
+
+def max_error(keys, x, active):
+    return (np.abs(kf.interpolate(keys) - x) * active[..., None]).max()
+
+
+def noisy_sines(t=200, n=40, d=6, noise=0.15, seed=7):
+    rng = np.random.default_rng(seed)
+    k = np.arange(t)[:, None, None]
+    x = 20 * np.sin(k / rng.uniform(8, 40, (1, n, d)) + rng.uniform(0, 6, (1, n, d)))
+    return x + rng.normal(0, noise, x.shape), rng.random((t, n)) > 0.15
+
+
+@pytest.mark.parametrize("eps", [0.05, 0.3, 2.0])
+def test_bound_holds_on_random_walks_with_hidden_frames(eps):
+    rng = np.random.default_rng(3)
+    x = np.cumsum(rng.normal(0, 0.4, (120, 50, 6)), axis=0)
+    active = rng.random((120, 50)) > 0.2
+    keys = freeknots.reduce_free(x, active, eps)
+    assert max_error(keys, x, active) <= eps * (1 + 1e-8)
+    assert keys.mask[0].all() and keys.mask[-1].all()
+
+
+def test_fewer_keys_than_sampled_keys_on_noisy_motion():
+    x, active = noisy_sines()
+    free = freeknots.reduce_free(x, active, 0.3)
+    sampled = kf.reduce(x, active, 0.3)
+    assert max_error(free, x, active) <= 0.3 * (1 + 1e-8)
+    assert free.mask.sum() < 0.85 * sampled.mask.sum()
+
+
+def test_point_keys_keep_the_euclidean_bound():
+    x, active = noisy_sines(n=30)
+    keys = kf.point_keys(x, active, 0.25)
+    err = np.linalg.norm((kf.interpolate(keys) - x).reshape(*x.shape[:2], 3, 2), axis=-1).max(axis=-1)
+    assert err[active].max() <= 0.25 * (1 + 1e-8)
+
+
+def test_still_hidden_and_never_active_tracks():
+    x = np.zeros((50, 3, 2))
+    x[:, 0] += np.random.default_rng(1).uniform(-0.05, 0.05, (50, 2))  # jitter inside the bound: still
+    x[25:, 1, 0] = 100.0  # jumps while hidden
+    active = np.ones((50, 3), bool)
+    active[20:30, 1] = False
+    active[:, 2] = False
+    keys = freeknots.reduce_free(x, active, 0.1)
+    assert keys.mask[:, 0].sum() == 2 and np.array_equal(keys.values[0, 0], keys.values[-1, 0])
+    assert keys.mask[:, 1].sum() <= 4 and max_error(keys, x, active) <= 0.1 * (1 + 1e-8)
+    assert not keys.mask[:, 2].any() and keys.first_active[2] == -1
+
+
+def test_tracks_the_compiled_pass_rejects_get_sampled_keys(monkeypatch):
+    x, active = noisy_sines(n=8)
+
+    def reject_all(x, active, eps, mask, values, bad, first, stop):
+        bad[first:stop] = True
+
+    monkeypatch.setattr(freeknots, "_reduce", reject_all)
+    keys = freeknots.reduce_free(x, active, 0.3)
+    sampled = kf.reduce(x, active, 0.3)
+    assert np.array_equal(keys.mask, sampled.mask) and np.array_equal(keys.values, sampled.values)
+
+
+def test_same_keys_on_one_thread(monkeypatch):
+    x, active = noisy_sines()
+    many = freeknots.reduce_free(x, active, 0.2)
+    monkeypatch.setattr(freeknots, "THREADS", 1)
+    one = freeknots.reduce_free(x, active, 0.2)
+    assert np.array_equal(many.mask, one.mask) and np.array_equal(many.values, one.values)
