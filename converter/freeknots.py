@@ -25,23 +25,28 @@ import numpy as np
 BIG = 1e7  # bound of the unconstrained first value and of every velocity (px, px/frame)
 MAX_VERTS = 40  # polygon capacity; a segment whose polygon would outgrow it is cut early (still valid)
 THREADS = max(1, min(4, os.cpu_count() or 1))
-_SLACK = 1e-9  # relative tolerance of the final check: violating tracks are rebuilt with sampled keys
+ON_LINE = 1e-10  # relative distance below which a polygon vertex counts as on a cutting line
+SLACK = 1e-8  # the bound holds to eps + SLACK (eps + |x| + 1); tracks the final check rejects get sampled keys
 
 
 @numba.njit(cache=True, nogil=True)
 def _clip(src, n, a, b, c, dst) -> int:
-    """Convex polygon src[:n] (points (p, v)) cut to a*p + b*v <= c, into dst; returns its vertex count."""
+    """Convex polygon src[:n] (points (p, v)) cut to a*p + b*v <= c, into dst; returns its vertex count.
+
+    A vertex within ON_LINE of the line counts as on it: kept, and no new vertex is made next to it. Without
+    that, rounding adds near-copies of vertices at every cut and the polygons outgrow MAX_VERTS."""
+    tol = ON_LINE * (abs(c) + 1.0)
     m = 0
     for i in range(n):
         j = i + 1 if i + 1 < n else 0
         si = a * src[i, 0] + b * src[i, 1] - c
         sj = a * src[j, 0] + b * src[j, 1] - c
-        if si <= 0.0:
+        if si <= tol:
             if m < dst.shape[0]:
                 dst[m, 0] = src[i, 0]
                 dst[m, 1] = src[i, 1]
             m += 1
-        if (si <= 0.0) != (sj <= 0.0):
+        if (si < -tol and sj > tol) or (si > tol and sj < -tol):
             f = si / (si - sj)
             if m < dst.shape[0]:
                 dst[m, 0] = src[i, 0] + f * (src[j, 0] - src[i, 0])
@@ -52,10 +57,23 @@ def _clip(src, n, a, b, c, dst) -> int:
 
 @numba.njit(cache=True, nogil=True)
 def _strip(src, n, tau, lo, hi, tmp, dst) -> int:
-    """Polygon src[:n] cut to lo <= p + tau v <= hi, into dst (tmp is scratch); 0 when empty."""
+    """Polygon src[:n] cut to lo <= p + tau v <= hi, into dst (tmp is scratch); 0 when empty, -1 when the strip
+    holds all of it (dst untouched)."""
+    q_lo, q_hi = np.inf, -np.inf
+    for i in range(n):
+        q = src[i, 0] + tau * src[i, 1]
+        q_lo, q_hi = min(q_lo, q), max(q_hi, q)
+    if q_lo >= lo and q_hi <= hi:
+        return -1
+    if q_hi < lo or q_lo > hi:
+        return 0
+    if q_hi <= hi:
+        return _clip(src, n, -1.0, -tau, -lo, dst)
+    if q_lo >= lo:
+        return _clip(src, n, 1.0, tau, hi, dst)
     m = _clip(src, n, 1.0, tau, hi, tmp)
     if m == 0 or m > tmp.shape[0]:
-        return 0 if m == 0 else dst.shape[0] + 1
+        return m
     return _clip(tmp, m, -1.0, -tau, -lo, dst)
 
 
@@ -109,18 +127,25 @@ def _slowest(poly, n):
 
 @numba.njit(cache=True, nogil=True)
 def _advance(poly, cnt, tau, xk, e, tmp, nxt, ncnt) -> bool:
-    """Every coordinate's polygon cut by frame k's strip into nxt; False when one empties or outgrows MAX_VERTS."""
+    """Every coordinate's polygon cut by frame k's strip, kept when none empties or outgrows MAX_VERTS."""
     for c in range(poly.shape[0]):
         ncnt[c] = _strip(poly[c], cnt[c], tau, xk[c] - e, xk[c] + e, tmp, nxt[c])
         if ncnt[c] == 0 or ncnt[c] > MAX_VERTS - 4:
             return False
+    for c in range(poly.shape[0]):
+        if ncnt[c] > 0:
+            cnt[c] = ncnt[c]
+            for i in range(ncnt[c]):
+                poly[c, i, 0] = nxt[c, i, 0]
+                poly[c, i, 1] = nxt[c, i, 1]
     return True
 
 
 @numba.njit(cache=True, nogil=True)
 def _reduce(x, active, eps, mask, values, bad, first, stop):
-    """Free-knot keys of tracks first..stop-1 into mask and values; bad marks tracks that need sampled keys."""
-    t, n, d = x.shape
+    """Free-knot keys of tracks first..stop-1 (track-major arrays) into mask and values; bad marks tracks that need
+    sampled keys."""
+    n, t, d = x.shape
     poly = np.empty((d, MAX_VERTS, 2))
     nxt = np.empty((d, MAX_VERTS, 2))
     cnt = np.empty(d, np.int64)
@@ -137,9 +162,9 @@ def _reduce(x, active, eps, mask, values, bad, first, stop):
         for c in range(d):
             cnt[c] = _rect(poly[c], -BIG, BIG)
         for k in range(t):
-            if not active[k, j]:
+            if not active[j, k]:
                 continue
-            if not _advance(poly, cnt, k - s, x[k, j], e, tmp, nxt, ncnt):
+            if not _advance(poly, cnt, k - s, x[j, k], e, tmp, nxt, ncnt):
                 if last <= s:
                     bad[j] = True
                     continue
@@ -156,11 +181,9 @@ def _reduce(x, active, eps, mask, values, bad, first, stop):
                     cnt[c] = _rect(poly[c], lo, hi)
                 nseg += 1
                 s = last
-                if not _advance(poly, cnt, k - s, x[k, j], e, tmp, nxt, ncnt):
+                if not _advance(poly, cnt, k - s, x[j, k], e, tmp, nxt, ncnt):
                     bad[j] = True  # cannot happen with a free velocity: safety net only
                     continue
-            poly, nxt = nxt, poly
-            cnt, ncnt = ncnt, cnt
             last = k
         if last < 0:
             continue  # never active: no keys
@@ -170,30 +193,30 @@ def _reduce(x, active, eps, mask, values, bad, first, stop):
             seg_poly[nseg, c, :cnt[c]] = poly[c, :cnt[c]]
         nseg += 1
         # Backward: the loop-end key with the slowest last segment, then each key mid-way along its chord.
-        mask[t, j] = True
+        mask[j, t] = True
         for c in range(d):
             p, v = _slowest(seg_poly[nseg - 1, c], seg_cnt[nseg - 1, c])
-            values[t, j, c] = p + v * (t - seg_t[nseg - 1])
-            values[seg_t[nseg - 1], j, c] = p
-        mask[seg_t[nseg - 1], j] = True
+            values[j, t, c] = p + v * (t - seg_t[nseg - 1])
+            values[j, seg_t[nseg - 1], c] = p
+        mask[j, seg_t[nseg - 1]] = True
         for i in range(nseg - 2, -1, -1):
-            mask[seg_t[i], j] = True
+            mask[j, seg_t[i]] = True
             span = seg_t[i + 1] - seg_t[i]
             for c in range(d):
-                values[seg_t[i], j, c] = _on_line(seg_poly[i, c], seg_cnt[i, c], span, values[seg_t[i + 1], j, c])
+                values[j, seg_t[i], c] = _on_line(seg_poly[i, c], seg_cnt[i, c], span, values[j, seg_t[i + 1], c])
         # The bound, checked on what was built (numerical safety net).
         i = 0
         for k in range(t):
             while i + 1 < nseg and seg_t[i + 1] <= k:
                 i += 1
-            if not active[k, j]:
+            if not active[j, k]:
                 continue
             a = seg_t[i]
             b = seg_t[i + 1] if i + 1 < nseg else t
             f = (k - a) / (b - a)
             for c in range(d):
-                y = values[a, j, c] + f * (values[b, j, c] - values[a, j, c])
-                if abs(y - x[k, j, c]) > e * (1.0 + _SLACK) + 1e-9:
+                y = values[j, a, c] + f * (values[j, b, c] - values[j, a, c])
+                if abs(y - x[j, k, c]) > e + SLACK * (e + abs(x[j, k, c]) + 1.0):
                     bad[j] = True
 
 
@@ -201,19 +224,21 @@ def reduce_free(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray):
     """Keys (keyframes.Keys) for tracks x (T, N, D) within eps per coordinate where active, with free key values."""
     from converter import keyframes
 
-    x = np.ascontiguousarray(x, np.float64)
+    x = np.asarray(x, np.float64)
     t, n, d = x.shape
-    active = np.ascontiguousarray(active, bool)
+    active = np.asarray(active, bool)
     eps = np.ascontiguousarray(np.broadcast_to(np.asarray(eps, np.float64), (n,)))
-    mask = np.zeros((t + 1, n), bool)
-    values = np.zeros((t + 1, n, d))
+    # Track-major copies: the loop walks each track through time.
+    xs, acts = np.ascontiguousarray(x.transpose(1, 0, 2)), np.ascontiguousarray(active.T)
+    mask_s, values_s = np.zeros((n, t + 1), bool), np.zeros((n, t + 1, d))
     bad = np.zeros(n, bool)
     if n and t:
-        # Two threads (the compiled loop releases the GIL) over halves of the tracks.
+        # Threads over slices of the tracks (the compiled loop releases the GIL).
         bounds = np.linspace(0, n, THREADS + 1).astype(np.int64)
         with ThreadPoolExecutor(THREADS) as pool:
-            list(pool.map(lambda i: _reduce(x, active, eps, mask, values, bad, bounds[i], bounds[i + 1]),
+            list(pool.map(lambda i: _reduce(xs, acts, eps, mask_s, values_s, bad, bounds[i], bounds[i + 1]),
                           range(THREADS)))
+    mask, values = np.ascontiguousarray(mask_s.T), np.ascontiguousarray(values_s.transpose(1, 0, 2))
     first = np.where(active.any(axis=0), np.argmax(active, axis=0), -1)
     if bad.any():  # numerically awkward tracks: sampled keys, always valid
         fb = keyframes.reduce(x[:, bad], active[:, bad], eps[bad])

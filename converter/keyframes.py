@@ -117,12 +117,32 @@ def interpolate(keys: Keys, frames: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
-def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray) -> Keys:
+SHAPES_DEG = (45.0, 30.0, 60.0)  # per path, the rectangle in each vertex's tolerance circle that needs fewest keys
+
+
+def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
+               shapes: tuple[float, ...] = SHAPES_DEG) -> Keys:
     """Free-knot keys for tracks of 2D points xy (T, N, 2m), each point within Euclidean radius where active."""
     from converter.freeknots import reduce_free
 
-    # Per coordinate: the square inscribed in each point's circle.
-    return reduce_free(xy, active, np.asarray(radius, np.float64) * math.sqrt(0.5))
+    m = xy.shape[2] // 2
+    r = np.broadcast_to(np.asarray(radius, np.float64), (xy.shape[1],))
+    best: Keys | None = None
+    for a in np.radians(shapes):
+        # Half-widths r cos a (x) and r sin a (y): a rectangle inscribed in the circle. Captured jitter is
+        # rarely the same on both axes, so the shape that needs fewest keys differs from path to path.
+        s = np.tile([1 / math.cos(a), 1 / math.sin(a)], m)
+        k = reduce_free(xy * s, active, r)
+        k = k._replace(values=k.values / s)
+        best = k if best is None else fewest(best, k)
+    assert best is not None, "no shapes"
+    return best
+
+
+def fewest(a: Keys, b: Keys) -> Keys:
+    """Per track the keys of a or b, whichever has fewer (a on ties)."""
+    win = b.mask.sum(axis=0) < a.mask.sum(axis=0)
+    return Keys(np.where(win, b.mask, a.mask), np.where(win[:, None], b.values, a.values), a.first_active)
 
 
 def _hat(n_frames: int, n_keys: int):

@@ -542,7 +542,9 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
     ok = r_local > 0.05 * global_radius  # a band that magnifies errors too much is not worth it
 
     def keys_of(x, r, cols=slice(None)):
-        return keyframes.point_keys(x[:, cols], act[:, cols], np.broadcast_to(np.maximum(r, 1e-6), (p,))[cols])
+        # Squares only: which paths to wrap is decided on these; the other shapes refine the chosen tracks below.
+        return keyframes.point_keys(x[:, cols], act[:, cols], np.broadcast_to(np.maximum(r, 1e-6), (p,))[cols],
+                                    keyframes.SHAPES_DEG[:1])
 
     kh, kl = keys_of(lay.head_local, r_head), keys_of(lay.local, r_local)
     # The plain encoding's key count only decides whether grouping pays: estimated from every PLAIN_SAMPLE-th path.
@@ -577,6 +579,7 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
     gain = np.where(wrapped, lay.gain, lay.head.gain)
     keys = keyframes.Keys(np.where(wrapped, kl.mask, kh.mask), np.where(wrapped[:, None], kl.values, kh.values),
                           np.where(wrapped, kl.first_active, kh.first_active))
+    keys = keyframes.fewest(keys, keyframes.point_keys(out_track, act, radius, keyframes.SHAPES_DEG[1:]))
     return Plan(lay.order, out_track, radius, opens, frozenset(closes), band, gain, lay.motions, stats, keys,
                 lay.head, outer)
 

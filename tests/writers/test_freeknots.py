@@ -11,6 +11,11 @@ def max_error(keys, x, active):
     return (np.abs(kf.interpolate(keys) - x) * active[..., None]).max()
 
 
+def within(err, eps, x):
+    """The documented bound: eps plus rounding far below any writer's float margin."""
+    return err <= eps + freeknots.SLACK * (eps + np.abs(x).max() + 1)
+
+
 def noisy_sines(t=200, n=40, d=6, noise=0.15, seed=7):
     rng = np.random.default_rng(seed)
     k = np.arange(t)[:, None, None]
@@ -24,7 +29,7 @@ def test_bound_holds_on_random_walks_with_hidden_frames(eps):
     x = np.cumsum(rng.normal(0, 0.4, (120, 50, 6)), axis=0)
     active = rng.random((120, 50)) > 0.2
     keys = freeknots.reduce_free(x, active, eps)
-    assert max_error(keys, x, active) <= eps * (1 + 1e-8)
+    assert within(max_error(keys, x, active), eps, x)
     assert keys.mask[0].all() and keys.mask[-1].all()
 
 
@@ -32,7 +37,7 @@ def test_fewer_keys_than_sampled_keys_on_noisy_motion():
     x, active = noisy_sines()
     free = freeknots.reduce_free(x, active, 0.3)
     sampled = kf.reduce(x, active, 0.3)
-    assert max_error(free, x, active) <= 0.3 * (1 + 1e-8)
+    assert within(max_error(free, x, active), 0.3, x)
     assert free.mask.sum() < 0.85 * sampled.mask.sum()
 
 
@@ -40,7 +45,7 @@ def test_point_keys_keep_the_euclidean_bound():
     x, active = noisy_sines(n=30)
     keys = kf.point_keys(x, active, 0.25)
     err = np.linalg.norm((kf.interpolate(keys) - x).reshape(*x.shape[:2], 3, 2), axis=-1).max(axis=-1)
-    assert err[active].max() <= 0.25 * (1 + 1e-8)
+    assert within(err[active].max(), 0.25, x)
 
 
 def test_still_hidden_and_never_active_tracks():
@@ -52,7 +57,7 @@ def test_still_hidden_and_never_active_tracks():
     active[:, 2] = False
     keys = freeknots.reduce_free(x, active, 0.1)
     assert keys.mask[:, 0].sum() == 2 and np.array_equal(keys.values[0, 0], keys.values[-1, 0])
-    assert keys.mask[:, 1].sum() <= 4 and max_error(keys, x, active) <= 0.1 * (1 + 1e-8)
+    assert keys.mask[:, 1].sum() <= 4 and within(max_error(keys, x, active), 0.1, x)
     assert not keys.mask[:, 2].any() and keys.first_active[2] == -1
 
 
