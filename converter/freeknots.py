@@ -16,15 +16,13 @@ The loops do not vectorise (polygons grow and shrink per track), so they are com
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
-
 import numba
 import numpy as np
 
+from converter import parallel
+
 BIG = 1e7  # bound of the unconstrained first value and of every velocity (px, px/frame)
 MAX_VERTS = 40  # polygon capacity; a segment whose polygon would outgrow it is cut early (still valid)
-THREADS = max(1, min(4, os.cpu_count() or 1))
 ON_LINE = 1e-10  # relative distance below which a polygon vertex counts as on a cutting line
 SLACK = 1e-8  # the bound holds to eps + SLACK (eps + |x| + 1); tracks the final check rejects get sampled keys
 
@@ -143,9 +141,9 @@ def _advance(poly, cnt, tau, xk, e, tmp, nxt, ncnt) -> bool:
 
 @numba.njit(cache=True, nogil=True)
 def _reduce(x, active, eps, mask, values, bad, first, stop):
-    """Free-knot keys of tracks first..stop-1 (track-major arrays) into mask and values; bad marks tracks that need
+    """Free-knot keys of tracks first..stop-1 into mask and values; bad marks tracks that need
     sampled keys."""
-    n, t, d = x.shape
+    t, n, d = x.shape
     poly = np.empty((d, MAX_VERTS, 2))
     nxt = np.empty((d, MAX_VERTS, 2))
     cnt = np.empty(d, np.int64)
@@ -162,9 +160,9 @@ def _reduce(x, active, eps, mask, values, bad, first, stop):
         for c in range(d):
             cnt[c] = _rect(poly[c], -BIG, BIG)
         for k in range(t):
-            if not active[j, k]:
+            if not active[k, j]:
                 continue
-            if not _advance(poly, cnt, k - s, x[j, k], e, tmp, nxt, ncnt):
+            if not _advance(poly, cnt, k - s, x[k, j], e, tmp, nxt, ncnt):
                 if last <= s:
                     bad[j] = True
                     continue
@@ -181,7 +179,7 @@ def _reduce(x, active, eps, mask, values, bad, first, stop):
                     cnt[c] = _rect(poly[c], lo, hi)
                 nseg += 1
                 s = last
-                if not _advance(poly, cnt, k - s, x[j, k], e, tmp, nxt, ncnt):
+                if not _advance(poly, cnt, k - s, x[k, j], e, tmp, nxt, ncnt):
                     bad[j] = True  # cannot happen with a free velocity: safety net only
                     continue
             last = k
@@ -193,30 +191,30 @@ def _reduce(x, active, eps, mask, values, bad, first, stop):
             seg_poly[nseg, c, :cnt[c]] = poly[c, :cnt[c]]
         nseg += 1
         # Backward: the loop-end key with the slowest last segment, then each key mid-way along its chord.
-        mask[j, t] = True
+        mask[t, j] = True
         for c in range(d):
             p, v = _slowest(seg_poly[nseg - 1, c], seg_cnt[nseg - 1, c])
-            values[j, t, c] = p + v * (t - seg_t[nseg - 1])
-            values[j, seg_t[nseg - 1], c] = p
-        mask[j, seg_t[nseg - 1]] = True
+            values[t, j, c] = p + v * (t - seg_t[nseg - 1])
+            values[seg_t[nseg - 1], j, c] = p
+        mask[seg_t[nseg - 1], j] = True
         for i in range(nseg - 2, -1, -1):
-            mask[j, seg_t[i]] = True
+            mask[seg_t[i], j] = True
             span = seg_t[i + 1] - seg_t[i]
             for c in range(d):
-                values[j, seg_t[i], c] = _on_line(seg_poly[i, c], seg_cnt[i, c], span, values[j, seg_t[i + 1], c])
+                values[seg_t[i], j, c] = _on_line(seg_poly[i, c], seg_cnt[i, c], span, values[seg_t[i + 1], j, c])
         # The bound, checked on what was built (numerical safety net).
         i = 0
         for k in range(t):
             while i + 1 < nseg and seg_t[i + 1] <= k:
                 i += 1
-            if not active[j, k]:
+            if not active[k, j]:
                 continue
             a = seg_t[i]
             b = seg_t[i + 1] if i + 1 < nseg else t
             f = (k - a) / (b - a)
             for c in range(d):
-                y = values[j, a, c] + f * (values[j, b, c] - values[j, a, c])
-                if abs(y - x[j, k, c]) > e + SLACK * (e + abs(x[j, k, c]) + 1.0):
+                y = values[a, j, c] + f * (values[b, j, c] - values[a, j, c])
+                if abs(y - x[k, j, c]) > e + SLACK * (e + abs(x[k, j, c]) + 1.0):
                     bad[j] = True
 
 
@@ -224,21 +222,14 @@ def reduce_free(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray):
     """Keys (keyframes.Keys) for tracks x (T, N, D) within eps per coordinate where active, with free key values."""
     from converter import keyframes
 
-    x = np.asarray(x, np.float64)
+    x = np.ascontiguousarray(x, np.float64)
     t, n, d = x.shape
-    active = np.asarray(active, bool)
+    active = np.ascontiguousarray(active, bool)
     eps = np.ascontiguousarray(np.broadcast_to(np.asarray(eps, np.float64), (n,)))
-    # Track-major copies: the loop walks each track through time.
-    xs, acts = np.ascontiguousarray(x.transpose(1, 0, 2)), np.ascontiguousarray(active.T)
-    mask_s, values_s = np.zeros((n, t + 1), bool), np.zeros((n, t + 1, d))
+    mask, values = np.zeros((t + 1, n), bool), np.zeros((t + 1, n, d))
     bad = np.zeros(n, bool)
     if n and t:
-        # Threads over slices of the tracks (the compiled loop releases the GIL).
-        bounds = np.linspace(0, n, THREADS + 1).astype(np.int64)
-        with ThreadPoolExecutor(THREADS) as pool:
-            list(pool.map(lambda i: _reduce(xs, acts, eps, mask_s, values_s, bad, bounds[i], bounds[i + 1]),
-                          range(THREADS)))
-    mask, values = np.ascontiguousarray(mask_s.T), np.ascontiguousarray(values_s.transpose(1, 0, 2))
+        parallel.threaded(_reduce, n, x, active, eps, mask, values, bad)
     first = np.where(active.any(axis=0), np.argmax(active, axis=0), -1)
     if bad.any():  # numerically awkward tracks: sampled keys, always valid
         fb = keyframes.reduce(x[:, bad], active[:, bad], eps[bad])

@@ -46,6 +46,7 @@ from scipy.cluster.vq import kmeans2
 from scipy.sparse.csgraph import connected_components
 
 from converter import keyframes
+from converter.overlap import overlap_pairs
 from converter.svgtext import number as svg_number
 
 HEAD_CLUSTERS = 24  # motion clusters of the largest band (the head)
@@ -55,10 +56,6 @@ CLUSTER_PLACE_WEIGHT = 0.5  # weight of the neutral position against the motion 
 MIN_BAND_TRIANGLES = 12  # smaller connected pieces join their part's largest piece
 SMALL_BAND_TRIANGLES, SMALL_BAND_SHARE = 100, 0.02  # pieces below max(these) never get a band of their own
 MERGE_PX = 1.5  # a piece whose motion a larger band explains this well (px, 95th percentile) joins it
-OVERLAP_BLOCK = 8  # frames per block of the bounding-box overlap search
-PAIR_BITMAP_MAX = 1 << 26  # path pairs deduplicated through a bitmap up to this many (8k paths, 64 MB)
-PAIR_CHUNK = 16384  # candidate pairs tested at once (bounds the temporary arrays)
-STROKE_MARGIN_PX = 0.5  # two paths closer than this may share stroke pixels: their order is kept
 HEAD_SHARE = 0.1  # px the head transform's keyframing may leave to the residual, as a share of the tolerance
 BAND_SHARE = 0.3  # the same for each band's transform inside the head's (smooth there, and repeated per run)
 HUBER_PX = 1.0  # scale of the robust (Cauchy) weights in the affine fit
@@ -305,107 +302,6 @@ def local_tracks(xy_paths: np.ndarray, mats: np.ndarray) -> np.ndarray:
 
 
 # --- drawing order ----------------------------------------------------------------------------------------------
-def _cell_pairs(lo: np.ndarray, hi: np.ndarray, cell: float) -> np.ndarray:
-    """(M, 2) index pairs of boxes [lo, hi] (N, 2) that share a grid cell of side cell (duplicates possible)."""
-    c0 = np.floor(lo / cell).astype(np.int64)
-    span = np.floor(hi / cell).astype(np.int64) - c0 + 1
-    n_cells = span[:, 0] * span[:, 1]
-    owner = np.repeat(np.arange(len(lo)), n_cells)
-    local = np.arange(int(n_cells.sum())) - np.repeat(np.cumsum(n_cells) - n_cells, n_cells)
-    sx = np.repeat(span[:, 0], n_cells)
-    cx = np.repeat(c0[:, 0], n_cells) + local % sx
-    cy = np.repeat(c0[:, 1], n_cells) + local // sx
-    key = (cx - cx.min()) * (int(cy.max() - cy.min()) + 1) + (cy - cy.min())
-    order = np.lexsort((owner, key))
-    key, owner = key[order], owner[order]
-    out = []
-    for d in range(1, len(key)):
-        same = np.flatnonzero(key[d:] == key[:-d])
-        if not len(same):
-            break
-        out.append(np.stack([owner[same], owner[same + d]], axis=1))
-    return np.concatenate(out) if out else np.zeros((0, 2), np.int64)
-
-
-def apart(pa: np.ndarray, pb: np.ndarray, margin: float) -> np.ndarray:
-    """Bool (...): triangles pa, pb (..., 3, 2) are more than margin apart along one of their 6 edge normals
-    (a separating-axis test; False may still mean apart, never the reverse)."""
-    # Written out per vertex and per axis: numpy reductions over axes of length 3 or 6 are far slower.
-    out = np.zeros(pa.shape[:-2], bool)
-    for tri in (pa, pb):
-        for i in range(3):
-            ex, ey = tri[..., (i + 1) % 3, 0] - tri[..., i, 0], tri[..., (i + 1) % 3, 1] - tri[..., i, 1]
-            nx, ny = -ey, ex
-            (a_lo, a_hi), (b_lo, b_hi) = _span(pa, nx, ny), _span(pb, nx, ny)
-            gap = np.maximum(b_lo - a_hi, a_lo - b_hi)
-            out |= gap > margin * np.sqrt(nx * nx + ny * ny)
-    return out
-
-
-def _span(tri: np.ndarray, nx: np.ndarray, ny: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Lowest and highest projection of triangles tri (..., 3, 2) on the axes (nx, ny) (...)."""
-    p0, p1, p2 = (nx * tri[..., k, 0] + ny * tri[..., k, 1] for k in range(3))
-    return np.minimum(np.minimum(p0, p1), p2), np.maximum(np.maximum(p0, p1), p2)
-
-
-def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP_BLOCK,
-                  margin: float = STROKE_MARGIN_PX, band: np.ndarray | None = None) -> np.ndarray:
-    """(E, 2) path pairs i < j that may come within margin px of each other in a frame where both are drawn.
-
-    Candidates: per block of frames, pairs whose bounding boxes over the block's drawn frames (grown by
-    margin / 2, the stroke's spill) meet, found through a uniform grid. Each candidate is then tested in every
-    frame of the block where both are drawn: their boxes, then the separating-axis test (``apart``). A pair is
-    kept unless every such frame shows it apart, so the result is conservative. A pair found in one block is not
-    tested again. With band (P,), only pairs of different bands are returned (``reorder`` keeps each band's own
-    order anyway). On the capture-like face this exact test halves the runs the box test alone leaves."""
-    t, p = active.shape
-    xy32 = np.asarray(xy_paths, np.float32)
-    seen = np.zeros(p * p, bool) if p * p <= PAIR_BITMAP_MAX else None  # dedupe by scatter, not by sorting
-    found = []
-    for k0 in range(0, t, block):
-        act = active[k0:k0 + block]
-        idx = np.flatnonzero(act.any(axis=0))
-        if len(idx) < 2:
-            continue
-        pts = xy32[k0:k0 + block, idx]  # (B, n, 3, 2)
-        on = act[:, idx]
-        lo = np.where(on[:, :, None, None], pts, np.inf).min(axis=(0, 2)) - margin / 2
-        hi = np.where(on[:, :, None, None], pts, -np.inf).max(axis=(0, 2)) + margin / 2
-        cell = max(1.5 * float(np.median((hi - lo).max(axis=1))), 1.0)
-        pairs = _cell_pairs(lo, hi, cell)
-        if band is not None:  # most neighbours share a band: drop them before any test
-            pairs = pairs[band[idx[pairs[:, 0]]] != band[idx[pairs[:, 1]]]]
-        a, b = pairs[:, 0], pairs[:, 1]
-        hit = (np.maximum(lo[a], lo[b]) <= np.minimum(hi[a], hi[b])).all(axis=1)
-        n = len(idx)
-        code = np.unique(np.minimum(a[hit], b[hit]) * n + np.maximum(a[hit], b[hit]))
-        la, lb = code // n, code % n
-        glob = idx[la] * p + idx[lb]
-        if seen is not None:
-            fresh = ~seen[glob]
-            la, lb, glob = la[fresh], lb[fresh], glob[fresh]
-        flo, fhi = pts.min(axis=2), pts.max(axis=2)  # per-frame boxes (B, n, 2)
-        for c0 in range(0, len(glob), PAIR_CHUNK):
-            sa, sb = la[c0:c0 + PAIR_CHUNK], lb[c0:c0 + PAIR_CHUNK]
-            lo_a, lo_b, hi_a, hi_b = flo[:, sa], flo[:, sb], fhi[:, sa], fhi[:, sb]
-            near = ((np.maximum(lo_a[..., 0], lo_b[..., 0]) <= np.minimum(hi_a[..., 0], hi_b[..., 0]) + margin)
-                    & (np.maximum(lo_a[..., 1], lo_b[..., 1]) <= np.minimum(hi_a[..., 1], hi_b[..., 1]) + margin))
-            fi, mi = np.nonzero(on[:, sa] & on[:, sb] & near)
-            meet = np.zeros(len(sa), bool)
-            meet[mi[~apart(pts[fi, sa[mi]], pts[fi, sb[mi]], margin)]] = True
-            if seen is not None:
-                seen[glob[c0:c0 + PAIR_CHUNK][meet]] = True
-            else:
-                found.append(glob[c0:c0 + PAIR_CHUNK][meet])
-    if seen is not None:
-        code = np.flatnonzero(seen)
-    elif found:
-        code = np.unique(np.concatenate(found))
-    else:
-        return np.zeros((0, 2), np.int64)
-    return np.column_stack([code // p, code % p])
-
-
 def reorder(band: np.ndarray, pairs: np.ndarray) -> np.ndarray:
     """A draw order (permutation) keeping every pair's order and each band's own order, continuing the current
     band greedily (switching to the band whose next path comes earliest)."""

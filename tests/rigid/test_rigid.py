@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from converter import keyframes, rigid
+from converter import keyframes, overlap, rigid
 from converter.extract import extract, fit_camera
 from tests.rigid.synth import captured_head
 
@@ -70,9 +70,9 @@ def test_reorder_keeps_every_overlapping_pair_and_merges_runs():
 def test_overlap_pairs_finds_touching_and_not_far_triangles():
     tri = np.array([[0, 0], [10, 0], [0, 10]], float)
     xy = np.stack([tri, tri + [10.2, 0], tri + [100, 100]])[None].reshape(1, 3, 3, 2)
-    pairs = rigid.overlap_pairs(xy, np.ones((1, 3), bool))
+    pairs = overlap.overlap_pairs(xy, np.ones((1, 3), bool))
     assert pairs.tolist() == [[0, 1]]
-    hidden = rigid.overlap_pairs(xy, np.array([[True, False, True]]))
+    hidden = overlap.overlap_pairs(xy, np.array([[True, False, True]]))
     assert hidden.tolist() == []
 
 
@@ -81,21 +81,21 @@ def test_overlap_pairs_drops_boxes_that_meet_when_the_triangles_do_not():
     a = np.array([[0, 0], [20, 20], [0, 2]], float)
     b = a + [1.5, -1.5]
     frames = np.stack([np.stack([a + k, b + k]) for k in range(6)])  # (6, 2, 3, 2), moving together
-    assert rigid.overlap_pairs(frames, np.ones((6, 2), bool)).tolist() == []
+    assert overlap.overlap_pairs(frames, np.ones((6, 2), bool)).tolist() == []
     # ... but one frame where they cross is enough to keep the pair.
     frames[4, 1] = frames[4, 0] + [1, 0]
-    assert rigid.overlap_pairs(frames, np.ones((6, 2), bool)).tolist() == [[0, 1]]
+    assert overlap.overlap_pairs(frames, np.ones((6, 2), bool)).tolist() == [[0, 1]]
     # ... unless that frame does not draw one of them.
     act = np.ones((6, 2), bool)
     act[4, 1] = False
-    assert rigid.overlap_pairs(frames, act).tolist() == []
+    assert overlap.overlap_pairs(frames, act).tolist() == []
 
 
 def test_apart_is_a_separating_axis_test():
     t = np.array([[0, 0], [4, 0], [0, 4]], float)
-    assert rigid.apart(t, t + [5, 0], 0.5) and not rigid.apart(t, t + [4.2, 0], 0.5)  # 1 px vs 0.2 px apart
-    assert not rigid.apart(t, t + [1, 1], 0.0)  # overlapping
-    assert rigid.apart(t, t[::-1] + [6, 6], 0.5)  # winding does not matter
+    assert overlap.apart(t, t + [5, 0], 0.5) and not overlap.apart(t, t + [4.2, 0], 0.5)  # 1 px vs 0.2 px apart
+    assert not overlap.apart(t, t + [1, 1], 0.0)  # overlapping
+    assert overlap.apart(t, t[::-1] + [6, 6], 0.5)  # winding does not matter
 
 
 @pytest.fixture(scope="module")

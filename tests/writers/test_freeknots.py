@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from converter import freeknots
+from converter import freeknots, parallel
 from converter import keyframes as kf
 
 
@@ -76,6 +76,6 @@ def test_tracks_the_compiled_pass_rejects_get_sampled_keys(monkeypatch):
 def test_same_keys_on_one_thread(monkeypatch):
     x, active = noisy_sines()
     many = freeknots.reduce_free(x, active, 0.2)
-    monkeypatch.setattr(freeknots, "THREADS", 1)
+    monkeypatch.setattr(parallel, "THREADS", 1)
     one = freeknots.reduce_free(x, active, 0.2)
     assert np.array_equal(many.mask, one.mask) and np.array_equal(many.values, one.values)

@@ -1,0 +1,182 @@
+"""Which paths may touch on screen: the pairs whose drawing order must be kept (converter.rigid.reorder).
+
+Two paths that never come within a stroke's spill of each other in a frame where both are drawn can be drawn
+in either order without changing a pixel. ``overlap_pairs`` finds the others: candidates from a uniform grid of
+bounding boxes per block of frames, then an exact test per candidate and frame (boxes, then a separating-axis
+test on the two triangles). The exact test stops at the first frame where a pair meets; that early exit is a
+loop numpy cannot express, so it is compiled with numba. Arithmetic is float32, as the positions are stored.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from converter import parallel
+
+OVERLAP_BLOCK = 8  # frames per block of the bounding-box candidate search
+PAIR_BITMAP_MAX = 1 << 26  # path pairs deduplicated through a bitmap up to this many (8k paths, 64 MB)
+STROKE_MARGIN_PX = 0.5  # two paths closer than this may share stroke pixels: their order is kept
+
+
+@numba.njit(cache=True, nogil=True)
+def _span(tri, nx, ny):
+    """Lowest and highest projection of triangle tri (3, 2) on the axis (nx, ny)."""
+    p0 = nx * tri[0, 0] + ny * tri[0, 1]
+    p1 = nx * tri[1, 0] + ny * tri[1, 1]
+    p2 = nx * tri[2, 0] + ny * tri[2, 1]
+    return min(min(p0, p1), p2), max(max(p0, p1), p2)
+
+
+@numba.njit(cache=True, nogil=True)
+def _apart(ta, tb, margin) -> bool:
+    """Triangles ta, tb (3, 2) are more than margin apart along one of their 6 edge normals."""
+    for side in range(2):
+        tri = ta if side == 0 else tb
+        for i in range(3):
+            k = (i + 1) % 3
+            nx = -(tri[k, 1] - tri[i, 1])
+            ny = tri[k, 0] - tri[i, 0]
+            a_lo, a_hi = _span(ta, nx, ny)
+            b_lo, b_hi = _span(tb, nx, ny)
+            if max(b_lo - a_hi, a_lo - b_hi) > margin * np.sqrt(nx * nx + ny * ny):
+                return True
+    return False
+
+
+@numba.njit(cache=True, nogil=True)
+def _meet(pts, on, la, lb, margin, out, first, stop) -> None:
+    """out[c] for candidates first..stop-1: paths la[c], lb[c] come within margin in a frame both draw."""
+    for c in range(first, stop):
+        a, b = la[c], lb[c]
+        for f in range(pts.shape[0]):
+            if not (on[f, a] and on[f, b]):
+                continue
+            pa, pb = pts[f, a], pts[f, b]
+            near = True
+            for ax in range(2):
+                lo_a = min(min(pa[0, ax], pa[1, ax]), pa[2, ax])
+                hi_a = max(max(pa[0, ax], pa[1, ax]), pa[2, ax])
+                lo_b = min(min(pb[0, ax], pb[1, ax]), pb[2, ax])
+                hi_b = max(max(pb[0, ax], pb[1, ax]), pb[2, ax])
+                if max(lo_a, lo_b) > min(hi_a, hi_b) + margin:
+                    near = False
+            if near and not _apart(pa, pb, margin):
+                out[c] = True
+                break
+
+
+def apart(pa: np.ndarray, pb: np.ndarray, margin: float) -> np.ndarray:
+    """Bool (...): triangles pa, pb (..., 3, 2) are more than margin apart along one of their 6 edge normals
+    (a separating-axis test; False may still mean apart, never the reverse)."""
+    a, b = np.broadcast_arrays(np.asarray(pa, np.float32), np.asarray(pb, np.float32))
+    shape = a.shape[:-2]
+    a, b = a.reshape(-1, 3, 2), b.reshape(-1, 3, 2)
+    m = np.float32(margin)
+    return np.array([_apart(a[i], b[i], m) for i in range(len(a))], bool).reshape(shape)
+
+
+def _cell_lists(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Boxes [lo, hi] (N, 2) on a grid of side cell: (cell key, box) for every cell a box covers, sorted by
+    key, and each box's lowest cell (N, 2)."""
+    c0 = np.floor(lo / cell).astype(np.int64)
+    span = np.floor(hi / cell).astype(np.int64) - c0 + 1
+    n_cells = span[:, 0] * span[:, 1]
+    owner = np.repeat(np.arange(len(lo)), n_cells)
+    local = np.arange(int(n_cells.sum())) - np.repeat(np.cumsum(n_cells) - n_cells, n_cells)
+    sx = np.repeat(span[:, 0], n_cells)
+    cx = np.repeat(c0[:, 0], n_cells) + local % sx
+    cy = np.repeat(c0[:, 1], n_cells) + local // sx
+    key = _cell_key(cx, cy, c0)
+    order = np.lexsort((owner, key))
+    return key[order], owner[order], c0
+
+
+def _cell_key(cx: np.ndarray, cy: np.ndarray, c0: np.ndarray) -> np.ndarray:
+    """One integer per grid cell (cx, cy) >= the lowest cell of c0, unique over the cells the boxes cover."""
+    return (cx - c0[:, 0].min()) * (1 << 31) + (cy - c0[:, 1].min())
+
+
+@numba.njit(cache=True, nogil=True)
+def _candidates(key, owner, c0, band, lo, hi, out) -> int:
+    """Pairs (a < b) of boxes of different band that meet, into out (M, 2) (only counted once it is full).
+
+    Each pair is reported in one cell only: the cell holding the low corner of the two boxes' intersection,
+    max(c0[a], c0[b]), which both cover when they meet."""
+    m = 0
+    start = 0
+    x0, y0 = c0[:, 0].min(), c0[:, 1].min()
+    while start < len(key):
+        stop = start + 1
+        while stop < len(key) and key[stop] == key[start]:
+            stop += 1
+        for i in range(start, stop):
+            a = owner[i]
+            for j in range(i + 1, stop):
+                b = owner[j]
+                if band[a] == band[b]:
+                    continue
+                if (max(lo[a, 0], lo[b, 0]) > min(hi[a, 0], hi[b, 0])
+                        or max(lo[a, 1], lo[b, 1]) > min(hi[a, 1], hi[b, 1])):
+                    continue
+                ref = (max(c0[a, 0], c0[b, 0]) - x0) * (1 << 31) + (max(c0[a, 1], c0[b, 1]) - y0)
+                if ref != key[start]:
+                    continue
+                if m < out.shape[0]:
+                    out[m, 0], out[m, 1] = min(a, b), max(a, b)
+                m += 1
+        start = stop
+    return m
+
+
+def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP_BLOCK,
+                  margin: float = STROKE_MARGIN_PX, band: np.ndarray | None = None) -> np.ndarray:
+    """(E, 2) path pairs i < j that may come within margin px of each other in a frame where both are drawn.
+
+    Candidates: per block of frames, pairs whose bounding boxes over the block's drawn frames (grown by
+    margin / 2, the stroke's spill) meet, found through a uniform grid. Each candidate is then tested in the
+    frames of the block where both are drawn: their boxes, then the separating-axis test (``apart``). A pair is
+    kept unless every such frame shows it apart, so the result is conservative. A pair found in one block is not
+    tested again. With band (P,), only pairs of different bands are returned (``reorder`` keeps each band's own
+    order anyway). On the capture-like face this exact test halves the runs the box test alone leaves."""
+    t, p = active.shape
+    xy32 = np.asarray(xy_paths, np.float32)
+    m32 = np.float32(margin)
+    seen = np.zeros(p * p, bool) if p * p <= PAIR_BITMAP_MAX else None  # dedupe by scatter, not by sorting
+    found = []
+    for k0 in range(0, t, block):
+        act = active[k0:k0 + block]
+        idx = np.flatnonzero(act.any(axis=0))
+        if len(idx) < 2:
+            continue
+        pts = np.ascontiguousarray(xy32[k0:k0 + block, idx])  # (B, n, 3, 2)
+        on = np.ascontiguousarray(act[:, idx])
+        lo = np.where(on[:, :, None, None], pts, np.inf).min(axis=(0, 2)) - margin / 2
+        hi = np.where(on[:, :, None, None], pts, -np.inf).max(axis=(0, 2)) + margin / 2
+        cell = max(1.5 * float(np.median((hi - lo).max(axis=1))), 1.0)
+        key, owner, c0 = _cell_lists(lo, hi, cell)
+        own_band = band[idx] if band is not None else np.arange(len(idx))  # most neighbours share a band
+        out = np.empty((4 * len(idx), 2), np.int64)
+        m = _candidates(key, owner, c0, own_band, lo, hi, out)
+        if m > len(out):
+            out = np.empty((m, 2), np.int64)
+            _candidates(key, owner, c0, own_band, lo, hi, out)
+        la, lb = out[:m, 0], out[:m, 1]
+        glob = idx[la] * p + idx[lb]
+        if seen is not None:
+            fresh = ~seen[glob]
+            la, lb, glob = la[fresh], lb[fresh], glob[fresh]
+        meet = np.zeros(len(glob), bool)
+        if len(glob):
+            parallel.threaded(_meet, len(glob), pts, on, la, lb, m32, meet)
+        if seen is not None:
+            seen[glob[meet]] = True
+        else:
+            found.append(glob[meet])
+    if seen is not None:
+        code = np.flatnonzero(seen)
+    elif found:
+        code = np.unique(np.concatenate(found))
+    else:
+        return np.zeros((0, 2), np.int64)
+    return np.column_stack([code // p, code % p])
