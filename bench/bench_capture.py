@@ -21,7 +21,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from bench.capture_like import capture_like, motion_stats  # noqa: E402
-from converter import extract, smoothing  # noqa: E402
+from converter import extract, freeknots, keyframes, smoothing  # noqa: E402
 from converter.options import ConversionOptions, Report  # noqa: E402
 from converter.verify import verify_animation  # noqa: E402
 from converter.writers import svg_anim  # noqa: E402
@@ -214,6 +214,13 @@ def _levers(sheet, anim, data: bytes, raw_n: int) -> list[str]:
         no_offsets, _, _ = _write(sheet, ConversionOptions(tolerance=0.5))
     finally:
         svg_anim.offsets = real_offsets
+    sampled = _without_free_knots(sheet)
+    real_shapes = keyframes.SHAPES_DEG
+    keyframes.SHAPES_DEG = real_shapes[:1]
+    try:
+        squares, _, _ = _write(sheet, ConversionOptions(tolerance=0.5))
+    finally:
+        keyframes.SHAPES_DEG = real_shapes
     out = [
         "Levers, each on its own, at 0.5 px (default output = rigid, relative integer paths; sizes in KB; %"
         " of raw):",
@@ -231,6 +238,12 @@ def _levers(sheet, anim, data: bytes, raw_n: int) -> list[str]:
         f"| keyTimes: {kt_n} attributes, {kt_dup} repeat an earlier one verbatim (the most sharing could save) |"
         f" {_kb(base)} | {_kb(base - kt_bytes * kt_dup / max(kt_n, 1))} | at most {_pct(kt_bytes * kt_dup / max(kt_n, 1), raw_n)}"
         f" of raw ({_kb(kt_bytes)} KB of keyTimes in all) |",
+        f"| free-knot keys (`converter/freeknots.py`) vs keys on sampled values, same per-axis bound |"
+        f" {_kb(len(sampled))} (gzip {_kb(_gz(sampled))}) | {_kb(base)} (gzip {_kb(_gz(data))}) |"
+        f" {_pct(len(sampled) - base, raw_n)} of raw, gzip {_pct(_gz(sampled) - _gz(data), raw_n)} |",
+        f"| per path the rectangle ({', '.join(f'{a:g}' for a in real_shapes)} deg) in the tolerance circle needing"
+        f" fewest keys vs the square only | {_kb(len(squares))} (gzip {_kb(_gz(squares))}) | {_kb(base)} |"
+        f" {_pct(len(squares) - base, raw_n)} of raw, gzip {_pct(_gz(squares) - _gz(data), raw_n)} |",
         f"| gzip -9 | {_kb(base)} | {_kb(_gz(data))} | {_pct(base - _gz(data), raw_n)} of raw |",
     ]
     for sigma in SMOOTH_SIGMAS:
@@ -244,6 +257,16 @@ def _levers(sheet, anim, data: bytes, raw_n: int) -> list[str]:
                    f" {_kb(base)} | {_kb(len(d))} ({_pct(len(d), raw_n)}; gzip {_pct(_gz(d), raw_n)}) |"
                    f" {_pct(base - len(d), raw_n)} of raw |")
     return out
+
+
+def _without_free_knots(sheet) -> bytes:
+    """The default output at 0.5 px with every path and colour key on a sampled value (keyframes.reduce)."""
+    real = freeknots.reduce_free
+    freeknots.reduce_free = keyframes.reduce
+    try:
+        return _write(sheet, ConversionOptions(tolerance=0.5))[0]
+    finally:
+        freeknots.reduce_free = real
 
 
 def _mobile(anim) -> list[str]:
@@ -321,6 +344,9 @@ def _targets(raw_n: int, kept: dict[float, bytes], visual: list[dict]) -> list[s
           for k, v in _SMOOTH.items()],
         f"| mobile <= 1.5 MB raw, <= 400 KB gzipped (0.25 px) | {m_raw / 1e6:.2f} MB, {m_gz / 1024:,.0f} KB |"
         f" {mark(m_raw <= 1.5e6 and m_gz <= 400 * 1024)} |",
+        *[f"| mobile at {k:g} px | {v[0] / 1e6:.2f} MB, {v[1] / 1024:,.0f} KB |"
+          f" {mark(v[0] <= 1.5e6 and v[1] <= 400 * 1024)} |" for k, v in _MOBILE.items() if not isinstance(k, tuple)
+          and k != 0.25],
         *[f"| mobile, {k[0]:g} px + `--smooth {k[1]:g}` | {v[0] / 1e6:.2f} MB, {v[1] / 1024:,.0f} KB |"
           f" {mark(v[0] <= 1.5e6 and v[1] <= 400 * 1024)} |" for k, v in _MOBILE.items() if isinstance(k, tuple)],
         f"| >= 1,000,000 triangle-frames/s (writer, 0.25 px; rigid / plain) | {_SPEED[0.25][0] / 1e6:.2f} M /"

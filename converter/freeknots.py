@@ -16,10 +16,15 @@ The loops do not vectorise (polygons grow and shrink per track), so they are com
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numba
 import numpy as np
 
 from converter import parallel
+
+if TYPE_CHECKING:
+    from converter.keyframes import Keys
 
 BIG = 1e7  # bound of the unconstrained first value and of every velocity (px, px/frame)
 MAX_VERTS = 40  # polygon capacity; a segment whose polygon would outgrow it is cut early (still valid)
@@ -218,7 +223,7 @@ def _reduce(x, active, eps, mask, values, bad, first, stop):
                     bad[j] = True
 
 
-def reduce_free(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray):
+def reduce_free(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray) -> Keys:
     """Keys (keyframes.Keys) for tracks x (T, N, D) within eps per coordinate where active, with free key values."""
     from converter import keyframes
 

@@ -121,10 +121,11 @@ SHAPES_DEG = (45.0, 30.0, 60.0)  # per path, the rectangle in each vertex's tole
 
 
 def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
-               shapes: tuple[float, ...] = SHAPES_DEG) -> Keys:
+               shapes: tuple[float, ...] | None = None) -> Keys:
     """Free-knot keys for tracks of 2D points xy (T, N, 2m), each point within Euclidean radius where active."""
-    from converter.freeknots import reduce_free
+    from converter import freeknots
 
+    shapes = SHAPES_DEG if shapes is None else shapes
     m = xy.shape[2] // 2
     r = np.broadcast_to(np.asarray(radius, np.float64), (xy.shape[1],))
     best: Keys | None = None
@@ -132,7 +133,7 @@ def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
         # Half-widths r cos a (x) and r sin a (y): a rectangle inscribed in the circle. Captured jitter is
         # rarely the same on both axes, so the shape that needs fewest keys differs from path to path.
         s = np.tile([1 / math.cos(a), 1 / math.sin(a)], m)
-        k = reduce_free(xy * s, active, r)
+        k = freeknots.reduce_free(xy * s, active, r)
         k = k._replace(values=k.values / s)
         best = k if best is None else fewest(best, k)
     assert best is not None, "no shapes"

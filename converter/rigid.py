@@ -475,7 +475,8 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
     gain = np.where(wrapped, lay.gain, lay.head.gain)
     keys = keyframes.Keys(np.where(wrapped, kl.mask, kh.mask), np.where(wrapped[:, None], kl.values, kh.values),
                           np.where(wrapped, kl.first_active, kh.first_active))
-    keys = keyframes.fewest(keys, keyframes.point_keys(out_track, act, radius, keyframes.SHAPES_DEG[1:]))
+    if len(keyframes.SHAPES_DEG) > 1:
+        keys = keyframes.fewest(keys, keyframes.point_keys(out_track, act, radius, keyframes.SHAPES_DEG[1:]))
     return Plan(lay.order, out_track, radius, opens, frozenset(closes), band, gain, lay.motions, stats, keys,
                 lay.head, outer)
 

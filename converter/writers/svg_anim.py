@@ -25,8 +25,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from converter import depth, keyframes
-from converter.freeknots import reduce_free
+from converter import depth, freeknots, keyframes
 from converter.options import ConversionOptions, Report
 from converter.sheet import Sheet
 from converter.svgtext import number as svg_number
@@ -234,7 +233,7 @@ def color_keys(rgb: np.ndarray, active: np.ndarray, tolerance: float) -> keyfram
     rounded to integer levels, which the tolerance includes)."""
     levels = np.asarray(rgb, np.float64) * 255
     eps = max(tolerance - 0.5 - COLOR_TIME_LEVELS, 1e-6)  # rounding, keyTimes
-    keys = reduce_free(levels, active, eps)
+    keys = freeknots.reduce_free(levels, active, eps)
     q = np.clip(np.rint(keys.values), 0, 255)
     return keys._replace(values=q)
 
