@@ -170,3 +170,29 @@ def test_local_radius_shrinks_with_gain():
     r = rigid.local_radius(0.25, np.array([1.0, 2.0]), 12, 0.0075, 1e-3)
     assert r[1] < r[0] / 1.9
     assert (r > 0).all()
+
+
+@pytest.mark.parametrize("bitmap", [True, False])
+def test_overlap_pairs_match_every_pair_tested_by_brute_force(monkeypatch, bitmap):
+    # Random small triangles over a few blocks of frames, some hidden, two bands: the grid candidates, their
+    # per-cell reporting and the dedupe across blocks (bitmap or sorted list) against testing every pair.
+    if not bitmap:
+        monkeypatch.setattr(overlap, "PAIR_BITMAP_MAX", 0)
+    rng = np.random.default_rng(11)
+    t, p = 20, 60
+    centre = rng.uniform(0, 60, (1, p, 1, 2)) + np.cumsum(rng.normal(0, 1.0, (t, p, 1, 2)), axis=0)
+    xy = centre + rng.uniform(-4, 4, (t, p, 3, 2))
+    active = rng.random((t, p)) > 0.3
+    band = rng.integers(0, 2, p)
+    got = {tuple(e) for e in overlap.overlap_pairs(xy, active, block=8, margin=0.5, band=band).tolist()}
+    want = set()
+    lo, hi = xy.min(axis=2), xy.max(axis=2)
+    for i in range(p):
+        for j in range(i + 1, p):
+            if band[i] == band[j]:
+                continue
+            both = active[:, i] & active[:, j]
+            near = both & ((np.maximum(lo[:, i], lo[:, j]) <= np.minimum(hi[:, i], hi[:, j]) + 0.5).all(axis=1))
+            if (near & ~overlap.apart(xy[:, i], xy[:, j], 0.5)).any():
+                want.add((i, j))
+    assert len(want) > 20 and got == want
