@@ -87,14 +87,15 @@ def _cell_lists(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray
     sx = np.repeat(span[:, 0], n_cells)
     cx = np.repeat(c0[:, 0], n_cells) + local % sx
     cy = np.repeat(c0[:, 1], n_cells) + local // sx
-    key = _cell_key(cx, cy, c0)
+    key = _cell_key(cx, cy, c0[:, 0].min(), c0[:, 1].min())
     order = np.lexsort((owner, key))
     return key[order], owner[order], c0
 
 
-def _cell_key(cx: np.ndarray, cy: np.ndarray, c0: np.ndarray) -> np.ndarray:
-    """One integer per grid cell (cx, cy) >= the lowest cell of c0, unique over the cells the boxes cover."""
-    return (cx - c0[:, 0].min()) * (1 << 31) + (cy - c0[:, 1].min())
+@numba.njit(cache=True, nogil=True)
+def _cell_key(cx, cy, x0, y0):
+    """One integer per grid cell (cx, cy) (scalars or arrays) at or past the cell (x0, y0)."""
+    return (cx - x0) * (1 << 31) + (cy - y0)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -119,8 +120,7 @@ def _candidates(key, owner, c0, band, lo, hi, out) -> int:
                 if (max(lo[a, 0], lo[b, 0]) > min(hi[a, 0], hi[b, 0])
                         or max(lo[a, 1], lo[b, 1]) > min(hi[a, 1], hi[b, 1])):
                     continue
-                ref = (max(c0[a, 0], c0[b, 0]) - x0) * (1 << 31) + (max(c0[a, 1], c0[b, 1]) - y0)
-                if ref != key[start]:
+                if _cell_key(max(c0[a, 0], c0[b, 0]), max(c0[a, 1], c0[b, 1]), x0, y0) != key[start]:
                     continue
                 if m < out.shape[0]:
                     out[m, 0], out[m, 1] = min(a, b), max(a, b)
@@ -149,8 +149,8 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP
         idx = np.flatnonzero(act.any(axis=0))
         if len(idx) < 2:
             continue
-        pts = np.ascontiguousarray(xy32[k0:k0 + block, idx])  # (B, n, 3, 2)
-        on = np.ascontiguousarray(act[:, idx])
+        pts = xy32[k0:k0 + block, idx]  # (B, n, 3, 2)
+        on = act[:, idx]
         lo = np.where(on[:, :, None, None], pts, np.inf).min(axis=(0, 2)) - margin / 2
         hi = np.where(on[:, :, None, None], pts, -np.inf).max(axis=(0, 2)) + margin / 2
         cell = max(1.5 * float(np.median((hi - lo).max(axis=1))), 1.0)
