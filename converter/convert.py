@@ -87,6 +87,7 @@ def convert_animation(
     sheet = extraction.extract(
         anim, camera, neutral=options.neutral_frame, occlusion=options.occlusion,
         progress=lambda s, f: progress(s, 0.1 + 0.5 * f),
+        occlusion_frames=None if options.frame is None else (options.frame,),  # a still: only its frame counts
     )
     if not sheet.kept.any():
         raise InputError("no triangle is ever visible from this camera (all face away or lie outside the view); "

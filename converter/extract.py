@@ -49,8 +49,12 @@ def extract(
     reference_frames: tuple[int, ...] = (),
     lighting: Lighting = DEFAULT_LIGHTING,
     progress: Progress = no_progress,
+    occlusion_frames: tuple[int, ...] | None = None,
 ) -> Sheet:
-    """Project every frame, cull, find never-seen triangles, shade, order: the Sheet writers read."""
+    """Project every frame, cull, find never-seen triangles, shade, order: the Sheet writers read.
+
+    occlusion_frames: the frames whose id renders decide which triangles are ever seen (default: all; a still
+    needs only its own frame)."""
     if not (0 <= neutral < anim.n_frames):
         raise InputError(f"neutral frame {neutral} is outside 0..{anim.n_frames - 1}; choose one inside.")
     frames, faces = anim.frames, anim.faces
@@ -58,8 +62,10 @@ def extract(
     visible = cull(xy, ndc_z, w, faces, camera.width, camera.height)
     progress("project", 0.1)
     if occlusion:
-        seen = render.triangle_ids(frames, faces, camera, progress=lambda f: progress("occlusion", 0.1 + 0.6 * f))
-        kept = (seen & visible).any(axis=0)
+        sel = np.arange(anim.n_frames) if occlusion_frames is None else np.asarray(occlusion_frames, np.int64)
+        seen = render.triangle_ids(frames[sel], faces, camera,
+                                   progress=lambda f: progress("occlusion", 0.1 + 0.6 * f))
+        kept = (seen & visible[sel]).any(axis=0)
     else:
         kept = visible.any(axis=0)
     progress("shade", 0.75)
