@@ -442,23 +442,33 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
         return keyframes.point_keys(x[:, cols], act[:, cols], np.broadcast_to(np.maximum(r, 1e-6), (p,))[cols],
                                     keyframes.SHAPES_DEG[:1])
 
-    kh, kl = keys_of(lay.head_local, r_head), keys_of(lay.local, r_local)
+    kh = keys_of(lay.head_local, r_head)
+    kh_n = kh.mask.sum(axis=0)
+    texts = [group_open(m, t, dur) for m in lay.motions]
+    runs = list(zip(lay.runs[:-1].tolist(), lay.runs[1:].tolist()))
+    # A run saves at most its head-local keys: band-local keys are worked out only where that could pay.
+    maybe = np.zeros(p, bool)
+    for a, b in runs:
+        maybe[a:b] = ok[a] and kh_n[a:b].sum() * BYTES_PER_KEY > len(texts[int(lay.band[a])]) + 4
+    cand = np.flatnonzero(maybe)
+    kl = keys_of(lay.local, r_local, cand)
+    kl_n = kh_n.copy()
+    kl_n[cand] = kl.mask.sum(axis=0)
     # The plain encoding's key count only decides whether grouping pays: estimated from every PLAIN_SAMPLE-th path.
     sample = np.arange(0, p, PLAIN_SAMPLE if p >= 50 * PLAIN_SAMPLE else 1)
     plain_keys = int(round(keys_of(glob, global_radius, sample).mask.sum() * p / len(sample)))
-    saved = (kh.mask.sum(axis=0) - kl.mask.sum(axis=0)) * BYTES_PER_KEY
+    saved = (kh_n - kl_n) * BYTES_PER_KEY
     opens: dict[int, str] = {}
     closes = set()
     wrapped = np.zeros(p, bool)
-    texts = [group_open(m, t, dur) for m in lay.motions]
-    for a, b in zip(lay.runs[:-1].tolist(), lay.runs[1:].tolist()):
+    for a, b in runs:
         band = int(lay.band[a])
         if ok[a] and saved[a:b].sum() > len(texts[band]) + 4:
             opens[a] = texts[band]
             closes.add(b - 1)
             wrapped[a:b] = True
     outer = group_open(lay.head, t, dur)
-    n_keys = np.where(wrapped, kl.mask.sum(0), kh.mask.sum(0))
+    n_keys = np.where(wrapped, kl_n, kh_n)
     grouped_cost = int(n_keys.sum()) * BYTES_PER_KEY + len(outer) + sum(len(texts[int(lay.band[a])]) for a in opens)
     stats = {"bands": len(lay.motions), "runs": len(lay.runs) - 1, "groups": len(opens),
              "grouped_paths": int(wrapped.sum()), "keys_global": plain_keys,
@@ -473,8 +483,10 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
     radius = np.where(wrapped, r_local, r_head)
     band = np.where(wrapped, lay.band, -1)
     gain = np.where(wrapped, lay.gain, lay.head.gain)
-    keys = keyframes.Keys(np.where(wrapped, kl.mask, kh.mask), np.where(wrapped[:, None], kl.values, kh.values),
-                          np.where(wrapped, kl.first_active, kh.first_active))
+    keys = kh  # the wrapped paths (all among cand) take their band-local keys
+    w = np.flatnonzero(wrapped)
+    at = np.searchsorted(cand, w)
+    keys.mask[:, w], keys.values[:, w] = kl.mask[:, at], kl.values[:, at]
     if len(keyframes.SHAPES_DEG) > 1:
         keys = keyframes.fewest(keys, keyframes.point_keys(out_track, act, radius, keyframes.SHAPES_DEG[1:]))
     return Plan(lay.order, out_track, radius, opens, frozenset(closes), band, gain, lay.motions, stats, keys,
