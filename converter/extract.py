@@ -62,7 +62,7 @@ def extract(
     visible = cull(xy, ndc_z, w, faces, camera.width, camera.height)
     progress("project", 0.1)
     if occlusion:
-        sel = np.arange(anim.n_frames) if occlusion_frames is None else np.asarray(occlusion_frames, np.int64)
+        sel = slice(None) if occlusion_frames is None else np.asarray(occlusion_frames, np.int64)
         seen = render.triangle_ids(frames[sel], faces, camera,
                                    progress=lambda f: progress("occlusion", 0.1 + 0.6 * f))
         kept = (seen & visible[sel]).any(axis=0)

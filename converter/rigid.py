@@ -446,10 +446,14 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
     kh_n = kh.mask.sum(axis=0)
     texts = [group_open(m, t, dur) for m in lay.motions]
     runs = list(zip(lay.runs[:-1].tolist(), lay.runs[1:].tolist()))
+
+    def pays(a: int, saved_bytes: float) -> bool:  # wrapping run a..: its band's transform text, once more
+        return bool(ok[a]) and saved_bytes > len(texts[int(lay.band[a])]) + 4
+
     # A run saves at most its head-local keys: band-local keys are worked out only where that could pay.
     maybe = np.zeros(p, bool)
     for a, b in runs:
-        maybe[a:b] = ok[a] and kh_n[a:b].sum() * BYTES_PER_KEY > len(texts[int(lay.band[a])]) + 4
+        maybe[a:b] = pays(a, kh_n[a:b].sum() * BYTES_PER_KEY)
     cand = np.flatnonzero(maybe)
     kl = keys_of(lay.local, r_local, cand)
     kl_n = kh_n.copy()
@@ -462,9 +466,8 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
     closes = set()
     wrapped = np.zeros(p, bool)
     for a, b in runs:
-        band = int(lay.band[a])
-        if ok[a] and saved[a:b].sum() > len(texts[band]) + 4:
-            opens[a] = texts[band]
+        if pays(a, saved[a:b].sum()):
+            opens[a] = texts[int(lay.band[a])]
             closes.add(b - 1)
             wrapped[a:b] = True
     outer = group_open(lay.head, t, dur)
