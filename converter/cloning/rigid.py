@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import connected_components
+
+if TYPE_CHECKING:
+    from converter.animation import FaceAnimation
 
 RIGID_PARTS = ("eye", "iris", "teeth")  # parts that move as solid bodies (eyeballs, teeth)
 
@@ -94,9 +98,7 @@ def components(faces: np.ndarray, part_ids: np.ndarray, parts: tuple, n_vertices
     return out
 
 
-
-
-def soft_faces(anim) -> np.ndarray:
+def soft_faces(anim: FaceAnimation) -> np.ndarray:
     """Triangles of the deformable parts (everything but eyeballs and teeth)."""
     rigid_part = np.array([p.name in RIGID_PARTS for p in anim.parts] or [False])
     return anim.faces[~rigid_part[anim.part_ids]]

@@ -37,8 +37,6 @@ def ball_smooth(points: np.ndarray, values: np.ndarray, radius: float) -> np.nda
     return (m @ values) / np.asarray(m.sum(axis=1))
 
 
-
-
 def triangle_frames(verts: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Corner a, edges ab and ac of every triangle."""
     a = verts[faces[:, 0]].astype(np.float64)
