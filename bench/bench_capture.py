@@ -21,7 +21,9 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from bench.capture_like import capture_like, motion_stats  # noqa: E402
-from converter import extract, freeknots, keyframes, smoothing  # noqa: E402
+from converter import extract, smoothing  # noqa: E402
+from converter.encode import freeknots  # noqa: E402
+from converter.encode import keys as keyframes  # noqa: E402
 from converter.options import ConversionOptions, Report  # noqa: E402
 from converter.verify import verify_animation  # noqa: E402
 from converter.writers import svg_anim  # noqa: E402
@@ -238,7 +240,7 @@ def _levers(sheet, anim, data: bytes, raw_n: int) -> list[str]:
         f"| keyTimes: {kt_n} attributes, {kt_dup} repeat an earlier one verbatim (the most sharing could save) |"
         f" {_kb(base)} | {_kb(base - kt_bytes * kt_dup / max(kt_n, 1))} | at most {_pct(kt_bytes * kt_dup / max(kt_n, 1), raw_n)}"
         f" of raw ({_kb(kt_bytes)} KB of keyTimes in all) |",
-        f"| free-knot keys (`converter/freeknots.py`) vs keys on sampled values, same per-axis bound |"
+        f"| free-knot keys (`converter/encode/freeknots.py`) vs keys on sampled values, same per-axis bound |"
         f" {_kb(len(sampled))} (gzip {_kb(_gz(sampled))}) | {_kb(base)} (gzip {_kb(_gz(data))}) |"
         f" {_pct(len(sampled) - base, raw_n)} of raw, gzip {_pct(_gz(sampled) - _gz(data), raw_n)} |",
         f"| per path the rectangle ({', '.join(f'{a:g}' for a in real_shapes)} deg) in the tolerance circle needing"

@@ -8,7 +8,7 @@ Three encodings of the same document structure:
   runs where a visible triangle does not move merged, placed with keyTimes (exact to 2 decimals); a path keeps
   every frame where keyTimes would cost more (the chapter's own remark on long dynamic sequences).
 - ``bounded`` (default): per path only the keys needed so SMIL's linear interpolation stays within
-  options.tolerance px of the exact projection at every frame where the triangle is visible (converter.freeknots:
+  options.tolerance px of the exact projection at every frame where the triangle is visible (converter.encode.freeknots:
   greedy keys with free values and keyTimes, or evenly spaced keys without them where that is shorter); integer coordinates in a
   viewBox scaled so rounding is part of the same budget; relative path syntax; static triangles without
   <animate>; fill and stroke are currentColor, the colour keyed linearly within COLOR_TOLERANCE levels and its
@@ -25,10 +25,12 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from converter import depth, freeknots, keyframes
+from converter.encode import freeknots, groups
+from converter.encode import keys as keyframes
+from converter.encode.order import draw_list
 from converter.options import ConversionOptions, Report
 from converter.sheet import Sheet
-from converter.svgtext import number as svg_number
+from converter.writers.svgtext import number as svg_number
 
 FORMAT_VERSION = 2
 STROKE_PX = 0.5  # stroke of the fill colour hides anti-aliasing seams between neighbours
@@ -258,7 +260,7 @@ def _discrete(attribute: str, codes: np.ndarray, names: list[str], kt: list[str]
 def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str = "bounded") -> bytes:
     """The animated SVG in one of the encodings: 'raw', 'chapter' or 'bounded' (module docstring)."""
     t = sheet.n_frames
-    dl = depth.draw_list(sheet, layers=options.depth_layers)
+    dl = draw_list(sheet, layers=options.depth_layers)
     tris, active = dl.triangles, dl.active
     shown = active.any(axis=0)  # a path never shown is dropped
     tris, active = tris[shown], active[:, shown]
@@ -268,9 +270,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     extra: dict = {"encoding": {"mode": mode}}
     plan = None
     if mode == "bounded" and options.rigid and p:
-        from converter import rigid  # rigid 2D motion factored into animated group transforms
-
-        plan = rigid.plan_for(sheet, options, tris, active, track, dur)
+        plan = groups.plan_for(sheet, options, tris, active, track, dur)
         if plan.head is not None:  # else nothing pays for a group: the plain encoding, byte for byte
             tris, active, track = tris[plan.order], active[:, plan.order], plan.track
         else:
@@ -418,7 +418,7 @@ def _uniform_instead(attribute: str, track: np.ndarray, active: np.ndarray, coun
 
 def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, active: np.ndarray,
                   track: np.ndarray, dur: str, report: Report, plan=None) -> tuple[list[str], int, dict]:
-    """The error-bounded integer encoding (module docstring); plan: converter.rigid.Plan (local tracks)."""
+    """The error-bounded integer encoding (module docstring); plan: converter.encode.groups.Plan (local tracks)."""
     t, p = active.shape
     tol = options.tolerance
     view_scale = viewbox_scale(tol)

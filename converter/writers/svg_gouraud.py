@@ -12,12 +12,12 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from converter import keyframes
+from converter.encode import keys as keyframes
 from converter.errors import InputError
 from converter.extract import painter_order
 from converter.options import ConversionOptions, Report
 from converter.sheet import Sheet
-from converter.svgtext import number as svg_number
+from converter.writers.svgtext import number as svg_number
 from converter.writers import svg_anim
 from converter.writers.gradients import exact_gradients, vertex_ramps
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from converter import freeknots, parallel
-from converter import keyframes as kf
+from converter.encode import freeknots, parallel
+from converter.encode import keys as kf
 
 
 def max_error(keys, x, active):

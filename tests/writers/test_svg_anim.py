@@ -104,7 +104,7 @@ def test_colour_keys_stay_within_colour_tolerance():
     rgb = np.clip(0.5 + 0.3 * np.sin(t / rng.uniform(3, 20, (1, 25, 3))), 0, 1)
     active = rng.random((60, 25)) > 0.15
     keys = svg_anim.color_keys(rgb, active, 3.0)
-    from converter.keyframes import interpolate
+    from converter.encode.keys import interpolate
 
     shown = interpolate(keys)
     assert np.abs(shown - rgb * 255)[active].max() <= 3.0 + 1e-9

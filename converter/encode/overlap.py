@@ -1,4 +1,4 @@
-"""Which paths may touch on screen: the pairs whose drawing order must be kept (converter.rigid.reorder).
+"""Which paths may touch on screen: the pairs whose drawing order must be kept (converter.encode.groups.reorder).
 
 Two paths that never come within a stroke's spill of each other in a frame where both are drawn can be drawn
 in either order without changing a pixel. ``overlap_pairs`` finds the others: candidates from a uniform grid of
@@ -12,7 +12,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from converter import parallel
+from converter.encode import parallel
 
 OVERLAP_BLOCK = 8  # frames per block of the bounding-box candidate search
 PAIR_BITMAP_MAX = 1 << 26  # path pairs deduplicated through a bitmap up to this many (8k paths, 64 MB)

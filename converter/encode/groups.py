@@ -45,9 +45,9 @@ from scipy import sparse
 from scipy.cluster.vq import kmeans2
 from scipy.sparse.csgraph import connected_components
 
-from converter import keyframes
-from converter.overlap import overlap_pairs
-from converter.svgtext import number as svg_number
+from converter.encode import keys as keyframes
+from converter.encode.overlap import overlap_pairs
+from converter.writers.svgtext import number as svg_number
 
 HEAD_CLUSTERS = 24  # motion clusters of the largest band (the head)
 CLUSTER_MIN_TRIANGLES = 50  # fewer clusters on small heads: at least this many triangles each

@@ -16,7 +16,7 @@ keyTimes end at 1) and its value is free: any velocity in the final box extrapol
 velocity is preferred, so a track that never moves beyond ``eps`` comes out as two equal keys (static).
 
 Keys on sampled values are what the transform stacks and the exact (``--raw``) encoding need. Paths' vertices
-and colours use ``converter.freeknots`` instead, whose key values are free within the bound (fewer keys);
+and colours use ``converter.encode.freeknots`` instead, whose key values are free within the bound (fewer keys);
 ``point_keys`` turns a Euclidean bound on 2D points into its per-coordinate one.
 """
 
@@ -123,7 +123,7 @@ SHAPES_DEG = (45.0, 30.0, 60.0)  # per path, the rectangle in each vertex's tole
 def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
                shapes: tuple[float, ...] | None = None) -> Keys:
     """Free-knot keys for tracks of 2D points xy (T, N, 2m), each point within Euclidean radius where active."""
-    from converter import freeknots
+    from converter.encode import freeknots
 
     shapes = SHAPES_DEG if shapes is None else shapes
     m = xy.shape[2] // 2

@@ -21,10 +21,10 @@ from typing import TYPE_CHECKING
 import numba
 import numpy as np
 
-from converter import parallel
+from converter.encode import parallel
 
 if TYPE_CHECKING:
-    from converter.keyframes import Keys
+    from converter.encode.keys import Keys
 
 BIG = 1e7  # bound of the unconstrained first value and of every velocity (px, px/frame)
 MAX_VERTS = 40  # polygon capacity; a segment whose polygon would outgrow it is cut early (still valid)
@@ -225,7 +225,7 @@ def _reduce(x, active, eps, mask, values, bad, first, stop):
 
 def reduce_free(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray) -> Keys:
     """Keys (keyframes.Keys) for tracks x (T, N, D) within eps per coordinate where active, with free key values."""
-    from converter import keyframes
+    from converter.encode import keys as keyframes
 
     x = np.ascontiguousarray(x, np.float64)
     t, n, d = x.shape
