@@ -217,12 +217,12 @@ def _levers(sheet, anim, data: bytes, raw_n: int) -> list[str]:
     finally:
         svg_anim.offsets = real_offsets
     sampled = _without_free_knots(sheet)
-    real_shapes = keyframes.SHAPES_DEG
-    keyframes.SHAPES_DEG = real_shapes[:1]
+    real_shapes = freeknots.SHAPES_DEG
+    freeknots.SHAPES_DEG = real_shapes[:1]
     try:
         squares, _, _ = _write(sheet, ConversionOptions(tolerance=0.5))
     finally:
-        keyframes.SHAPES_DEG = real_shapes
+        freeknots.SHAPES_DEG = real_shapes
     out = [
         "Levers, each on its own, at 0.5 px (default output = rigid, relative integer paths; sizes in KB; %"
         " of raw):",

@@ -45,6 +45,7 @@ from scipy import sparse
 from scipy.cluster.vq import kmeans2
 from scipy.sparse.csgraph import connected_components
 
+from converter.encode import freeknots
 from converter.encode import keys as keyframes
 from converter.encode.overlap import overlap_pairs
 from converter.writers.svgtext import number as svg_number
@@ -439,8 +440,8 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
 
     def keys_of(x, r, cols=slice(None)):
         # Squares only: which paths to wrap is decided on these; the other shapes refine the chosen tracks below.
-        return keyframes.point_keys(x[:, cols], act[:, cols], np.broadcast_to(np.maximum(r, 1e-6), (p,))[cols],
-                                    keyframes.SHAPES_DEG[:1])
+        return freeknots.point_keys(x[:, cols], act[:, cols], np.broadcast_to(np.maximum(r, 1e-6), (p,))[cols],
+                                    freeknots.SHAPES_DEG[:1])
 
     kh = keys_of(lay.head_local, r_head)
     kh_n = kh.mask.sum(axis=0)
@@ -490,8 +491,8 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
     w = np.flatnonzero(wrapped)
     at = np.searchsorted(cand, w)
     keys.mask[:, w], keys.values[:, w] = kl.mask[:, at], kl.values[:, at]
-    if len(keyframes.SHAPES_DEG) > 1:
-        keys = keyframes.fewest(keys, keyframes.point_keys(out_track, act, radius, keyframes.SHAPES_DEG[1:]))
+    if len(freeknots.SHAPES_DEG) > 1:
+        keys = keyframes.fewest(keys, freeknots.point_keys(out_track, act, radius, freeknots.SHAPES_DEG[1:]))
     return Plan(lay.order, out_track, radius, opens, frozenset(closes), band, gain, lay.motions, stats, keys,
                 lay.head, outer)
 

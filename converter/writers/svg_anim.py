@@ -431,7 +431,7 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
     if plan is not None:  # the plan reduced these tracks to decide its groups: the same keys
         keys = plan.keys
     else:
-        keys = keyframes.point_keys(track, active, radius)
+        keys = freeknots.point_keys(track, active, radius)
     q = np.rint(keys.values[..., :6] * view_scale).astype(np.int64)
     pk, fk = np.nonzero(keys.mask.T)
     rows = q.transpose(1, 0, 2)[pk, fk]

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from converter.encode import groups, overlap
+from converter.encode import freeknots, groups, overlap
 from converter.encode import keys as keyframes
 from converter.extract import extract, fit_camera
 from tests.rigid.synth import captured_head
@@ -121,7 +121,7 @@ def _plan(sheet, tol, **kw):
 def test_composed_error_within_tolerance(sheet, tol):
     plan, act, track, scale, _ = _plan(sheet, tol)
     act = act[:, plan.order]
-    keys = keyframes.point_keys(plan.track, act, plan.radius)
+    keys = freeknots.point_keys(plan.track, act, plan.radius)
     q = np.rint(keys.values * scale) / scale  # what the file holds (integer viewBox units)
     played = keyframes.interpolate(keyframes.Keys(keys.mask, q, keys.first_active))
     err = np.linalg.norm((groups.compose_tracks(plan, played) - track[:, plan.order]).reshape(*act.shape, 3, 2),
