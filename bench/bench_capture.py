@@ -23,6 +23,7 @@ if str(ROOT) not in sys.path:
 from bench.capture_like import capture_like, motion_stats  # noqa: E402
 from converter import extract, smoothing  # noqa: E402
 from converter.encode import freeknots  # noqa: E402
+from converter.encode.budget import viewbox_scale  # noqa: E402
 from converter.encode import keys as keyframes  # noqa: E402
 from converter.options import ConversionOptions, Report  # noqa: E402
 from converter.verify import verify_animation  # noqa: E402
@@ -204,7 +205,7 @@ def run() -> str:
 
 def _levers(sheet, anim, data: bytes, raw_n: int) -> list[str]:
     """Each lever on its own at 0.5 px, against the default output."""
-    scale = svg_anim.viewbox_scale(0.5)
+    scale = viewbox_scale(0.5)
     base = len(data)
     absolute = len(_rewrite_paths(data, _absolute))
     decimals = len(_rewrite_paths(data, _decimals_px(scale)))

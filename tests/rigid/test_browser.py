@@ -7,6 +7,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from converter.encode import groups
+from converter.writers.svg_transforms import group_open
 from tests.svgrender import chromium_frame, iou
 
 SIZE = 200
@@ -29,7 +30,7 @@ def test_chromium_plays_the_transform_stack(browser, artifacts):
     local = np.array([[-50.0, -30.0], [55.0, -10.0], [-20.0, 45.0]])  # px, relative to the band origin
     d = "M{} {}L{} {}L{} {}z".format(*np.rint(local * scale).astype(int).reshape(-1).tolist())
     svg = (f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {SIZE * scale} {SIZE * scale}" width="{SIZE}" '
-           f'height="{SIZE}">{groups.group_open(motion, FRAMES, f"{FRAMES / FPS:g}s")}'
+           f'height="{SIZE}">{group_open(motion, FRAMES, f"{FRAMES / FPS:g}s")}'
            f'<path d="{d}" fill="#000"/></g></svg>').encode()
     worst = 1.0
     for k in (0, 3, 7, 12, 18):

@@ -7,9 +7,12 @@ import math
 import numpy as np
 import pytest
 
+from converter import verify
 from converter.encode import freeknots, groups, overlap
 from converter.encode import keys as keyframes
+from converter.encode.budget import ErrorBudget
 from converter.extract import extract, fit_camera
+from converter.writers.svg_transforms import CLOSE, group_open
 from tests.rigid.synth import captured_head
 
 
@@ -113,8 +116,10 @@ def _plan(sheet, tol, **kw):
     scale = max(1, math.ceil(1 / (math.sqrt(2) * 0.25 * tol)))
     tb, fe = 0.03 * tol, 1e-3
     rg = tol - math.sqrt(0.5) / scale - tb - fe
-    return groups.plan(sheet.xy, sheet.faces, sheet.part_ids, 0, tris, act, track, tol, scale, tb, fe,
-                      rg, "2.4s", **kw), act, track, scale, rg
+    budget = ErrorBudget(tol, scale, math.sqrt(0.5) / scale, tb, fe, rg)
+    costs = groups.Costs(lambda m: len(group_open(m, t, "2.4s")), len(CLOSE), 24)
+    plan = groups.plan(sheet.xy, sheet.faces, sheet.part_ids, 0, tris, act, track, budget, costs, **kw)
+    return plan, act, track, scale, rg
 
 
 @pytest.mark.parametrize("tol", [0.25, 0.5])
@@ -131,28 +136,24 @@ def test_composed_error_within_tolerance(sheet, tol):
     assert plan.stats["keys_rigid"] < 0.75 * plan.stats["keys_global"]
 
 
-def test_groups_open_and_close_in_pairs(sheet):
+def test_groups_are_disjoint_runs_of_one_band(sheet):
     plan, *_ = _plan(sheet, 0.25)
-    opens = sorted(plan.opens)
-    closes = sorted(plan.closes)
-    assert len(opens) == len(closes)
-    assert all(a <= b < c for a, b, c in zip(opens, closes, opens[1:] + [10 ** 9]))
+    runs = plan.groups.tolist()
+    assert runs and all(a < b <= c for (a, b), (c, _) in zip(runs, runs[1:] + [(10 ** 9, 0)]))
     grouped = np.zeros(len(plan.band), bool)
-    for a, b in zip(opens, closes):
-        grouped[a:b + 1] = True
-        assert len(set(plan.band[a:b + 1].tolist())) == 1
+    for a, b in runs:
+        grouped[a:b] = True
+        assert len(set(plan.band[a:b].tolist())) == 1
     assert ((plan.band >= 0) == grouped).all()
 
 
 def test_group_markup_plays_the_matrices_in_the_verifier(sheet):
-    from converter import verify
-
     plan, *_ = _plan(sheet, 0.25)
-    b = int(plan.band[min(plan.opens)])
+    b = int(plan.band[plan.groups[0, 0]])
     motion = plan.motions[b]
     t = motion.matrices.shape[0]
     scale = 7
-    text = groups.group_open(groups.band_motion(*_params(motion), scale=scale, kt_decimals=4), t, "2.4s")
+    text = group_open(groups.band_motion(*_params(motion), scale=scale, kt_decimals=4), t, "2.4s")
     svg = (f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {256 * scale} {256 * scale}" width="256" '
            f'height="256"><metadata id="facesvg">{{"frames": {t}, "fps": 25, "viewport": [256, 256]}}</metadata>'
            f'{text}<path id="f0" d="M{scale} 0L0 {scale}L0 0z"/></g></svg>').encode()
@@ -168,7 +169,7 @@ def _params(motion):
 
 
 def test_local_radius_shrinks_with_gain():
-    r = groups.local_radius(0.25, np.array([1.0, 2.0]), 12, 0.0075, 1e-3)
+    r = ErrorBudget.split(0.25, 512).local_keys(np.array([1.0, 2.0]))
     assert r[1] < r[0] / 1.9
     assert (r > 0).all()
 
