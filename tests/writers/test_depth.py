@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from bench.order_measure import order_error
 from converter import extract
 from converter.encode import order
 from converter.animation import FaceAnimation, Part
@@ -31,10 +32,10 @@ def test_order_error_sees_a_wrong_fixed_order(scene):
     big_first = order.DrawList(np.array([0, 1, 2, 3], np.int32), sheet.visible[:, [0, 1, 2, 3]])
     # Early frames: the small square is behind, so drawing it last is wrong; late frames the reverse.
     early, late = [0, 1], [10, 11]
-    assert order.order_error(anim.frames, sheet, back_first, early)["max"] < 0.02
-    assert order.order_error(anim.frames, sheet, big_first, early)["max"] > 0.1
-    assert order.order_error(anim.frames, sheet, big_first, late)["max"] < 0.02
-    assert order.order_error(anim.frames, sheet, back_first, late)["max"] > 0.1
+    assert order_error(anim.frames, sheet, back_first, early)["max"] < 0.02
+    assert order_error(anim.frames, sheet, big_first, early)["max"] > 0.1
+    assert order_error(anim.frames, sheet, big_first, late)["max"] < 0.02
+    assert order_error(anim.frames, sheet, back_first, late)["max"] > 0.1
 
 
 def test_layer_copies_fix_the_crossing(scene):
@@ -43,8 +44,8 @@ def test_layer_copies_fix_the_crossing(scene):
     layered = order.layered(sheet)
     frames = list(range(anim.n_frames))
     assert len(layered.triangles) > len(fixed.triangles) and layered.conflicts > 0
-    assert order.order_error(anim.frames, sheet, fixed, frames)["max"] > 0.1
-    assert order.order_error(anim.frames, sheet, layered, frames)["max"] < 0.02
+    assert order_error(anim.frames, sheet, fixed, frames)["max"] > 0.1
+    assert order_error(anim.frames, sheet, layered, frames)["max"] < 0.02
     # A triangle and its copy never show at the same frame.
     for t in np.unique(layered.triangles):
         assert layered.active[:, layered.triangles == t].sum(axis=1).max() <= 1
