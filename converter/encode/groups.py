@@ -16,7 +16,7 @@ Each fit is robust least squares from the neutral frame, written as an SMIL tran
 
 which is exactly the QR decomposition of the affine map (rotation times upper-triangular), about the band's
 centroid (path coordinates are relative to it). Each parameter is keyframed on its own with
-``keyframes.reduce`` and rounded; SMIL interpolates the parameters linearly, so the *played* transform
+``keys.reduce`` and rounded; SMIL interpolates the parameters linearly, so the *played* transform
 between keys is not the fitted one.
 
 Why the bound still holds: the residual each path encodes is measured against the played transforms, not the
@@ -32,6 +32,10 @@ paths past each other where that cannot change a pixel (``overlap_pairs``: they 
 a frame where both are drawn), greedily continuing the current band, which merges many runs; ``plan`` then
 wraps only the runs whose saved keys outweigh the text of their transform stack, and leaves the others in the
 head's frame. When even the head group does not pay for itself, nothing is grouped.
+
+This module knows numbers and error budgets only: ``plan`` returns which runs to wrap and the played transforms,
+and the writer (converter.writers.svg_transforms) writes the markup. What text costs, the writer tells it
+through ``Costs``.
 """
 
 from __future__ import annotations
