@@ -21,7 +21,10 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from bench.capture_like import capture_like, motion_stats  # noqa: E402
-from converter import extract, freeknots, keyframes, smoothing  # noqa: E402
+from converter import extract, smoothing  # noqa: E402
+from converter.encode import freeknots  # noqa: E402
+from converter.encode.budget import viewbox_scale  # noqa: E402
+from converter.encode import keys as keyframes  # noqa: E402
 from converter.options import ConversionOptions, Report  # noqa: E402
 from converter.verify import verify_animation  # noqa: E402
 from converter.writers import svg_anim  # noqa: E402
@@ -202,7 +205,7 @@ def run() -> str:
 
 def _levers(sheet, anim, data: bytes, raw_n: int) -> list[str]:
     """Each lever on its own at 0.5 px, against the default output."""
-    scale = svg_anim.viewbox_scale(0.5)
+    scale = viewbox_scale(0.5)
     base = len(data)
     absolute = len(_rewrite_paths(data, _absolute))
     decimals = len(_rewrite_paths(data, _decimals_px(scale)))
@@ -215,12 +218,12 @@ def _levers(sheet, anim, data: bytes, raw_n: int) -> list[str]:
     finally:
         svg_anim.offsets = real_offsets
     sampled = _without_free_knots(sheet)
-    real_shapes = keyframes.SHAPES_DEG
-    keyframes.SHAPES_DEG = real_shapes[:1]
+    real_shapes = freeknots.SHAPES_DEG
+    freeknots.SHAPES_DEG = real_shapes[:1]
     try:
         squares, _, _ = _write(sheet, ConversionOptions(tolerance=0.5))
     finally:
-        keyframes.SHAPES_DEG = real_shapes
+        freeknots.SHAPES_DEG = real_shapes
     out = [
         "Levers, each on its own, at 0.5 px (default output = rigid, relative integer paths; sizes in KB; %"
         " of raw):",
@@ -238,7 +241,7 @@ def _levers(sheet, anim, data: bytes, raw_n: int) -> list[str]:
         f"| keyTimes: {kt_n} attributes, {kt_dup} repeat an earlier one verbatim (the most sharing could save) |"
         f" {_kb(base)} | {_kb(base - kt_bytes * kt_dup / max(kt_n, 1))} | at most {_pct(kt_bytes * kt_dup / max(kt_n, 1), raw_n)}"
         f" of raw ({_kb(kt_bytes)} KB of keyTimes in all) |",
-        f"| free-knot keys (`converter/freeknots.py`) vs keys on sampled values, same per-axis bound |"
+        f"| free-knot keys (`converter/encode/freeknots.py`) vs keys on sampled values, same per-axis bound |"
         f" {_kb(len(sampled))} (gzip {_kb(_gz(sampled))}) | {_kb(base)} (gzip {_kb(_gz(data))}) |"
         f" {_pct(len(sampled) - base, raw_n)} of raw, gzip {_pct(_gz(sampled) - _gz(data), raw_n)} |",
         f"| per path the rectangle ({', '.join(f'{a:g}' for a in real_shapes)} deg) in the tolerance circle needing"

@@ -262,7 +262,7 @@ def run() -> str:
                     f"Exact file / chapter file = {ratio:.1%} (target <= 40%). Interior pixels: {interior:,} at 1x "
                     f"({4 * interior:,} at 2x).\n\n"
                     "Animated Gouraud SVG of the whole sequence (gradient endpoints and stop colours animated; "
-                    "keyframes from converter.keyframes at tolerance 0.25 px / 2 colour levels unless --raw; one timed run each):\n\n"
+                    "keyframes from converter.encode.keys at tolerance 0.25 px / 2 colour levels unless --raw; one timed run each):\n\n"
                     f"| output | bytes | write s | keys | Chromium at t = {k}/fps: SSIM / PSNR, cracks |\n"
                     "|---|---|---|---|---|\n" + "\n".join(anim_rows)
                 )

@@ -16,7 +16,9 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from bench.faces import _animated_face, chapter_face, face_region, ict_bench_face, ict_head  # noqa: E402
-from converter import depth, extract, formats  # noqa: E402
+from bench.order_measure import order_error, robust_order  # noqa: E402
+from converter import extract, formats  # noqa: E402
+from converter.encode import order  # noqa: E402
 from converter.convert import convert_animation  # noqa: E402
 from converter.options import ConversionOptions, Report  # noqa: E402
 from converter.verify import verify_animation  # noqa: E402
@@ -86,22 +88,22 @@ def mobile(anim, budget: int = 1500) -> dict:
 def depth_rows(anim, sheet, label: str, which: list[int], with_layers: bool) -> list[str]:
     """Pixels whose front triangle differs from the z-buffer, per ordering."""
     rows = []
-    fixed = depth.draw_list(sheet)
+    fixed = order.draw_list(sheet)
     candidates = [("fixed neutral-frame order (default)", fixed)]
-    robust = depth.robust_order(sheet, sheet.order)
-    candidates.append(("robust order (mean visible depth)", depth.DrawList(robust, sheet.visible[:, robust])))
+    robust = robust_order(sheet, sheet.order)
+    candidates.append(("robust order (mean visible depth)", order.DrawList(robust, sheet.visible[:, robust])))
     if with_layers:
         t = time.perf_counter()
-        lay = depth.layered(sheet)
+        lay = order.layered(sheet)
         candidates.append((f"layer copies (+{len(lay.triangles) - len(fixed.triangles)} paths, "
                            f"{time.perf_counter() - t:.0f} s)", lay))
     for title, dl in candidates:
-        e = depth.order_error(anim.frames, sheet, dl, which)
+        e = order_error(anim.frames, sheet, dl, which)
         rows.append(f"| {label} | {title} | {100 * e['mean']:.2f}% | {100 * e['max']:.2f}% |")
     oracle = []
     for k in which:
         o = sheet.order[np.argsort(-sheet.depth[k][sheet.faces[sheet.order]].mean(axis=1), kind="stable")]
-        oracle.append(depth.order_error(anim.frames, sheet, depth.DrawList(o, sheet.visible[:, o]), [k])["max"])
+        oracle.append(order_error(anim.frames, sheet, order.DrawList(o, sheet.visible[:, o]), [k])["max"])
     rows.append(f"| {label} | per-frame painter's sort (bound for one order per frame) | "
                 f"{100 * np.mean(oracle):.2f}% | {100 * max(oracle):.2f}% |")
     return rows

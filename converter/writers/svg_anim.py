@@ -8,7 +8,7 @@ Three encodings of the same document structure:
   runs where a visible triangle does not move merged, placed with keyTimes (exact to 2 decimals); a path keeps
   every frame where keyTimes would cost more (the chapter's own remark on long dynamic sequences).
 - ``bounded`` (default): per path only the keys needed so SMIL's linear interpolation stays within
-  options.tolerance px of the exact projection at every frame where the triangle is visible (converter.freeknots:
+  options.tolerance px of the exact projection at every frame where the triangle is visible (converter.encode.freeknots:
   greedy keys with free values and keyTimes, or evenly spaced keys without them where that is shorter); integer coordinates in a
   viewBox scaled so rounding is part of the same budget; relative path syntax; static triangles without
   <animate>; fill and stroke are currentColor, the colour keyed linearly within COLOR_TOLERANCE levels and its
@@ -25,18 +25,23 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from converter import depth, freeknots, keyframes
+from converter.encode import freeknots, groups
+from converter.encode import keys as keyframes
+from converter.encode.budget import ErrorBudget, viewbox_scale
+from converter.encode.order import draw_list
+from converter.errors import InputError
 from converter.options import ConversionOptions, Report
 from converter.sheet import Sheet
-from converter.svgtext import number as svg_number
+from converter.writers.svg_transforms import CLOSE, group_open
+from converter.writers.svgtext import key_times
+from converter.writers.svgtext import number as svg_number
 
 FORMAT_VERSION = 2
 STROKE_PX = 0.5  # stroke of the fill colour hides anti-aliasing seams between neighbours
 COLOR_TOLERANCE = 3.0  # 8-bit levels per channel a shown colour may differ from the exact flat shade
 COLOR_TIME_LEVELS = 0.1  # of which rounding the colour keyTimes may take
 COLOR_SLACK = 0.05  # levels kept free of evenly spaced colour keys (checked exactly, rounding included)
-QUANT_SHARE = 0.25  # share of the tolerance spent on integer rounding (the rest on keyframes)
-TIME_SHARE = 0.015  # share of the tolerance spent on rounding keyTimes
+BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime): what groups weigh
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
 HIDDEN_CLASS = "h"
 
@@ -49,24 +54,6 @@ def hex_colors(rgb: np.ndarray) -> np.ndarray:
 def _hex(levels: np.ndarray) -> np.ndarray:
     code = (levels[..., 0] << 16) | (levels[..., 1] << 8) | levels[..., 2]
     return np.char.add("#", np.char.zfill(np.char.lower(np.char.mod("%x", code)), 6))
-
-
-
-
-def viewbox_scale(tolerance: float) -> int:
-    """Viewport px -> integer viewBox units: rounding (at most step/sqrt 2 px) takes QUANT_SHARE of the bound."""
-    return max(1, math.ceil(1.0 / (math.sqrt(2) * QUANT_SHARE * tolerance)))
-
-
-def key_time_strings(n_frames: int, decimals: int, discrete: bool) -> list[str]:
-    """keyTimes text for frames 0..T: frame k at k/T; a discrete change half a frame early (k - 1/2)/T, so
-    frame k shows it however a player rounds its clock."""
-    q = 10**decimals
-    k = np.arange(n_frames + 1, dtype=np.float64)
-    if discrete:
-        k = np.maximum(k - 0.5, 0.0)
-    units = np.rint(k * q / n_frames).astype(np.int64)
-    return [svg_number(u / q, decimals) for u in units.tolist()]
 
 
 def key_time_decimals(n_frames: int, slope: np.ndarray, budget: float) -> np.ndarray:
@@ -95,15 +82,6 @@ def key_slopes(mask: np.ndarray, rows: np.ndarray, pairs: bool) -> np.ndarray:
     out[:-1] = seg
     out[1:] = np.maximum(out[1:], seg)
     return out
-
-
-def key_time_texts(n_frames: int, frames: np.ndarray, decimals: np.ndarray) -> list[str]:
-    """keyTimes text of each key (frame k at k/T) with its own number of decimals."""
-    out = np.empty(len(frames), object)
-    for dj in np.unique(decimals).tolist():
-        sel = decimals == dj
-        out[sel] = np.asarray(key_time_strings(n_frames, dj, discrete=False), object)[frames[sel]]
-    return out.tolist()
 
 
 def metadata(sheet: Sheet, options: ConversionOptions, report: Report, extra: dict | None = None,
@@ -159,8 +137,6 @@ def _style(palette: np.ndarray, scale: int) -> str:
 
 def write_still(sheet: Sheet, options: ConversionOptions, report: Report, frame: int) -> bytes:
     """One frame as static paths (exact colours, coordinates rounded to the tolerance's grid)."""
-    from converter.errors import InputError
-
     if not 0 <= frame < sheet.n_frames:
         raise InputError(f"frame {frame} is outside 0..{sheet.n_frames - 1}; choose one inside.")
     scale = viewbox_scale(options.tolerance)
@@ -258,7 +234,7 @@ def _discrete(attribute: str, codes: np.ndarray, names: list[str], kt: list[str]
 def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str = "bounded") -> bytes:
     """The animated SVG in one of the encodings: 'raw', 'chapter' or 'bounded' (module docstring)."""
     t = sheet.n_frames
-    dl = depth.draw_list(sheet, layers=options.depth_layers)
+    dl = draw_list(sheet, layers=options.depth_layers)
     tris, active = dl.triangles, dl.active
     shown = active.any(axis=0)  # a path never shown is dropped
     tris, active = tris[shown], active[:, shown]
@@ -266,11 +242,11 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     dur = f"{sheet.duration:.6f}".rstrip("0").rstrip(".") + "s"  # SMIL clock values need the leading digit
     track = sheet.xy[:, sheet.faces[tris]].reshape(t, p, 6).astype(np.float64)
     extra: dict = {"encoding": {"mode": mode}}
+    budget = ErrorBudget.split(options.tolerance, max(sheet.camera.width, sheet.camera.height))
     plan = None
     if mode == "bounded" and options.rigid and p:
-        from converter import rigid  # rigid 2D motion factored into animated group transforms
-
-        plan = rigid.plan_for(sheet, options, tris, active, track, dur)
+        costs = groups.Costs(lambda m: len(group_open(m, t, dur)), len(CLOSE), BYTES_PER_KEY)
+        plan = groups.plan(sheet.xy, sheet.faces, sheet.part_ids, sheet.neutral, tris, active, track, budget, costs)
         if plan.head is not None:  # else nothing pays for a group: the plain encoding, byte for byte
             tris, active, track = tris[plan.order], active[:, plan.order], plan.track
         else:
@@ -279,7 +255,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
         body = _encode_raw(sheet, tris, active, track, dur, chapter=mode == "chapter")
         scale = 1
     else:
-        body, scale, enc = _encode_keyed(sheet, options, tris, active, track, dur, report, plan)
+        body, scale, enc = _encode_keyed(sheet, budget, tris, active, track, dur, report, plan)
         extra["encoding"].update(enc)
     head = [_header(sheet, scale), metadata(sheet, options, report, extra, order=tris),
             f"<title>{escape(sheet.name)}</title>"]
@@ -310,7 +286,7 @@ def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.nd
     run reduced to its two ends) placed with keyTimes, exact to 2 decimals."""
     t, p = active.shape
     colors = hex_colors(sheet.face_rgb[:, tris]).tolist()  # (T, P)
-    kt = key_time_strings(t, 6, discrete=True)
+    kt = key_times(np.arange(t + 1), t, 6, "early")
     vis = _discrete("visibility", active.astype(np.int64), ["hidden", "visible"], kt, dur)
     names_arr, fill_codes = np.unique(np.asarray(colors), return_inverse=True)
     fills = _discrete("fill", fill_codes.reshape(t, p), names_arr.tolist(), kt, dur)
@@ -322,7 +298,7 @@ def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.nd
         text = _raw_strings(keys.values.transpose(1, 0, 2)[pk, fk] / 100.0)
         bounds = np.searchsorted(pk, np.arange(p + 1)).tolist()
         moving = _varying(keys.mask, keys.values.transpose(1, 0, 2)[pk, fk])
-        kt_lin = key_time_strings(t, 6, discrete=False)
+        kt_lin = key_times(np.arange(t + 1), t, 6)
         fkl = fk.tolist()
     out = ['<g stroke-width="0.5" stroke-linejoin="round">']
     ids = path_ids(tris)
@@ -416,22 +392,21 @@ def _uniform_instead(attribute: str, track: np.ndarray, active: np.ndarray, coun
     return len(values)
 
 
-def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, active: np.ndarray,
-                  track: np.ndarray, dur: str, report: Report, plan=None) -> tuple[list[str], int, dict]:
-    """The error-bounded integer encoding (module docstring); plan: converter.rigid.Plan (local tracks)."""
+def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: np.ndarray, track: np.ndarray,
+                  dur: str, report: Report, plan: groups.Plan | None = None) -> tuple[list[str], int, dict]:
+    """The error-bounded integer encoding (module docstring) within budget; plan: rigid groups (local tracks)."""
     t, p = active.shape
-    tol = options.tolerance
-    view_scale = viewbox_scale(tol)
-    time_budget = TIME_SHARE * tol
-    float_err = 1e-4 + 2e-7 * max(sheet.camera.width, sheet.camera.height)
-    radius = tol - math.sqrt(0.5) / view_scale - time_budget - float_err  # Euclidean px left for keyframing
-    bound = tol - float_err
+    tol = budget.tolerance
+    view_scale = budget.scale
+    time_budget = budget.keytimes
+    radius = budget.keys  # Euclidean px left for keyframing
+    bound = budget.fit_bound
     if plan is not None:  # per path: local px, scaled down by the error gain of the path's group transform
         radius, bound = plan.radius, bound / plan.gain
     if plan is not None:  # the plan reduced these tracks to decide its groups: the same keys
         keys = plan.keys
     else:
-        keys = keyframes.point_keys(track, active, radius)
+        keys = freeknots.point_keys(track, active, radius)
     q = np.rint(keys.values[..., :6] * view_scale).astype(np.int64)
     pk, fk = np.nonzero(keys.mask.T)
     rows = q.transpose(1, 0, 2)[pk, fk]
@@ -446,7 +421,7 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
     off = offsets(rows, pk, p)
     off[~moving] = 0
     text = _path_strings(rows, off[pk])
-    d_anims, d_first, n_keys = _linear("d", keys.mask, text, key_time_texts(t, fk, decimals), dur, moving)
+    d_anims, d_first, n_keys = _linear("d", keys.mask, text, key_times(fk, t, decimals), dur, moving)
     counts = keys.mask.sum(axis=0)
     d_len = np.array([len(a) for a in d_anims])
     per_key = np.bincount(pk, np.fromiter(map(len, text), np.float64, len(text)), p) / np.maximum(counts, 1)
@@ -459,7 +434,7 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
     crow = ckeys.values.transpose(1, 0, 2)[cpk, cfk].astype(np.int64)
     c_vary = _varying(ckeys.mask, crow)
     c_dec = key_time_decimals(t, key_slopes(ckeys.mask, crow, False), COLOR_TIME_LEVELS)
-    c_anims, _, n_color_keys = _linear("color", ckeys.mask, _hex(crow).tolist(), key_time_texts(t, cfk, c_dec), dur,
+    c_anims, _, n_color_keys = _linear("color", ckeys.mask, _hex(crow).tolist(), key_times(cfk, t, c_dec), dur,
                                        c_vary)
     c_len = np.array([len(a) for a in c_anims])
     n_uniform += _uniform_instead("color", sheet.face_rgb[:, tris].astype(np.float64) * 255, active,
@@ -478,11 +453,20 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
     names = [f"c{i}" for i in range(len(palette))] + [HIDDEN_CLASS]  # code -1 -> hidden
     codes = np.where(active, cls[None, :], -1)
     disc_decimals = int(math.ceil(math.log10(4 * t))) if t > 1 else 1
-    v_anims = _discrete("class", codes, names, key_time_strings(t, disc_decimals, discrete=True), dur)
-    out = [_style(palette, view_scale), plan.outer if plan is not None else "<g>"]
+    v_anims = _discrete("class", codes, names, key_times(np.arange(t + 1), t, disc_decimals, "early"), dur)
+    out = [_style(palette, view_scale), group_open(plan.head, t, dur) if plan is not None else "<g>"]
     ids = path_ids(tris)
     moves = [f' transform="translate({x} {y})"' if x or y else "" for x, y in off.tolist()]
-    opens, closes = (plan.opens, plan.closes) if plan is not None else ({}, frozenset())
+    opens: dict[int, str] = {}
+    closes: set[int] = set()
+    if plan is not None:
+        texts: dict[int, str] = {}  # one text per band, repeated for each of its runs
+        for a, b in plan.groups.tolist():
+            band = int(plan.band[a])
+            if band not in texts:
+                texts[band] = group_open(plan.motions[band], t, dur)
+            opens[a] = texts[band]
+            closes.add(b - 1)
     for j in range(p):
         if j in opens:
             out.append(opens[j])
@@ -490,7 +474,7 @@ def _encode_keyed(sheet: Sheet, options: ConversionOptions, tris: np.ndarray, ac
         el = f'<path id="{ids[j]}" class="{names[codes[0, j]]}"{moves[j]} d="{d_first[j]}"'
         out.append(f"{el}>{body}</path>" if body else f"{el}/>")
         if j in closes:
-            out.append("</g>")
+            out.append(CLOSE)
     report.counts["keys"] = n_keys
     report.counts["uniform_paths"] = n_uniform
     report.counts["color_keys"] = n_color_keys

@@ -11,15 +11,17 @@ from __future__ import annotations
 from xml.sax.saxutils import escape
 
 import numpy as np
+from PIL import Image, ImageDraw
 
-from converter import keyframes
+from converter.encode import keys as keyframes
 from converter.errors import InputError
 from converter.extract import painter_order
 from converter.options import ConversionOptions, Report
 from converter.sheet import Sheet
-from converter.svgtext import number as svg_number
 from converter.writers import svg_anim
 from converter.writers.gradients import exact_gradients, vertex_ramps
+from converter.writers.svgtext import key_times
+from converter.writers.svgtext import number as svg_number
 
 PATH_FMT = "M%.2f,%.2fL%.2f,%.2fL%.2f,%.2f"  # open: "Z" is added where every edge is stroked
 COORD_FMT = "%.2f"
@@ -47,11 +49,9 @@ CHAPTER_FILTER = (
 
 
 def _key_times(frames: np.ndarray, n_frames: int, floor: bool) -> str:
-    """keyTimes text for frame indices (frame k at k / T); floor for discrete changes so frame k sees its value."""
-    decimals = len(str(n_frames)) + 2
-    q = 10**decimals
-    units = (frames * q) // n_frames if floor else np.rint(frames * q / n_frames).astype(np.int64)
-    return ";".join(svg_number(u / q, decimals) for u in units.tolist())
+    """keyTimes attribute text for frame indices (frame k at k / T); floor for discrete changes so frame k sees
+    its value."""
+    return ";".join(key_times(frames, n_frames, len(str(n_frames)) + 2, "floor" if floor else "nearest"))
 
 
 class _Track:
@@ -213,8 +213,6 @@ def silhouette_edges(tri_xy: np.ndarray, outline: np.ndarray, width: int, height
     Where a surface folds away the edge has no neighbour, yet another drawn surface continues beyond it: a
     crack there shows the page unless something lies under it. Decided on a 2x raster of the drawn union.
     """
-    from PIL import Image, ImageDraw
-
     scale = 2
     img = Image.new("1", (width * scale, height * scale), 0)
     draw = ImageDraw.Draw(img)

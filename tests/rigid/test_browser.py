@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 from PIL import Image, ImageDraw
 
-from converter import rigid
+from converter.encode import groups
+from converter.writers.svg_transforms import group_open
 from tests.svgrender import chromium_frame, iou
 
 SIZE = 200
@@ -14,12 +15,12 @@ FRAMES = 20
 FPS = 10.0
 
 
-def _motion(scale: int) -> rigid.BandMotion:
+def _motion(scale: int) -> groups.BandMotion:
     k = np.arange(FRAMES) / FRAMES
     params = np.column_stack([100 + 30 * np.sin(2 * np.pi * k), 100 + 20 * np.cos(2 * np.pi * k),
                               60 * np.sin(2 * np.pi * k), 15 * np.sin(4 * np.pi * k),
                               1 + 0.3 * np.sin(2 * np.pi * k), 1 - 0.25 * np.sin(2 * np.pi * k)])
-    return rigid.band_motion(params, np.zeros(2), 60.0, 0.05, scale, kt_decimals=4)
+    return groups.band_motion(params, np.zeros(2), 60.0, 0.05, scale, kt_decimals=4)
 
 
 def test_chromium_plays_the_transform_stack(browser, artifacts):
@@ -29,7 +30,7 @@ def test_chromium_plays_the_transform_stack(browser, artifacts):
     local = np.array([[-50.0, -30.0], [55.0, -10.0], [-20.0, 45.0]])  # px, relative to the band origin
     d = "M{} {}L{} {}L{} {}z".format(*np.rint(local * scale).astype(int).reshape(-1).tolist())
     svg = (f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {SIZE * scale} {SIZE * scale}" width="{SIZE}" '
-           f'height="{SIZE}">{rigid.group_open(motion, FRAMES, f"{FRAMES / FPS:g}s")}'
+           f'height="{SIZE}">{group_open(motion, FRAMES, f"{FRAMES / FPS:g}s")}'
            f'<path d="{d}" fill="#000"/></g></svg>').encode()
     worst = 1.0
     for k in (0, 3, 7, 12, 18):

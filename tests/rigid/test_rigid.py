@@ -7,29 +7,33 @@ import math
 import numpy as np
 import pytest
 
-from converter import keyframes, overlap, rigid
+from converter import verify
+from converter.encode import freeknots, groups, overlap
+from converter.encode import keys as keyframes
+from converter.encode.budget import ErrorBudget
 from converter.extract import extract, fit_camera
+from converter.writers.svg_transforms import CLOSE, group_open
 from tests.rigid.synth import captured_head
 
 
 def _random_affine(rng, t):
     params = np.column_stack([rng.uniform(-50, 50, (t, 2)), rng.uniform(-170, 170, t), rng.uniform(-30, 30, t),
                               rng.uniform(0.5, 2, t), rng.uniform(0.5, 2, t)])
-    return params, rigid.compose(params, np.zeros(2))
+    return params, groups.compose(params, np.zeros(2))
 
 
 def test_decompose_inverts_compose():
     rng = np.random.default_rng(0)
     params, mats = _random_affine(rng, 50)
-    back = rigid.decompose(mats, np.zeros(2))
-    assert np.allclose(rigid.compose(back, np.zeros(2)), mats, atol=1e-9)
+    back = groups.decompose(mats, np.zeros(2))
+    assert np.allclose(groups.compose(back, np.zeros(2)), mats, atol=1e-9)
     assert np.allclose(back[:, 3:], params[:, 3:], atol=1e-9)  # skew and scales come back exactly
 
 
 def test_svg_stack_order_is_translate_rotate_skew_scale():
     # translate(tx ty) rotate(a) skewX(k) scale(sx sy) written out by hand for one point.
     p = np.array([[10.0, -4.0, 30.0, 20.0, 1.2, 0.8]])  # tx ty angle skew sx sy
-    m = rigid.compose(p, np.zeros(2))[0]
+    m = groups.compose(p, np.zeros(2))[0]
     a = math.radians(30.0)
     x, y = 2.0, 3.0
     x, y = 1.2 * x, 0.8 * y  # scale
@@ -44,7 +48,7 @@ def test_fit_affine_is_robust_to_local_motion():
     _, mats = _random_affine(rng, 5)
     xy = np.einsum("tij,nj->tni", mats[:, :, :2], ref) + mats[:, None, :, 2]
     xy[:, :40] += rng.uniform(5, 20, (5, 40, 2))  # a tenth of the points move on their own (a mouth)
-    fit = rigid.fit_affine(ref, xy)
+    fit = groups.fit_affine(ref, xy)
     assert np.abs(fit - mats).max() < 0.05 * np.abs(mats).max()
     pred = np.einsum("tij,nj->tni", fit[:, :, :2], ref) + fit[:, None, :, 2]
     assert np.linalg.norm(pred - xy, axis=-1)[:, 40:].max() < 0.5
@@ -56,7 +60,7 @@ def test_reorder_keeps_every_overlapping_pair_and_merges_runs():
     band = rng.integers(0, 3, p)
     pairs = np.unique(np.sort(rng.integers(0, p, (400, 2)), axis=1), axis=0)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-    order = rigid.reorder(band, pairs)
+    order = groups.reorder(band, pairs)
     assert sorted(order.tolist()) == list(range(p))
     pos = np.empty(p, int)
     pos[order] = np.arange(p)
@@ -112,62 +116,60 @@ def _plan(sheet, tol, **kw):
     scale = max(1, math.ceil(1 / (math.sqrt(2) * 0.25 * tol)))
     tb, fe = 0.03 * tol, 1e-3
     rg = tol - math.sqrt(0.5) / scale - tb - fe
-    return rigid.plan(sheet.xy, sheet.faces, sheet.part_ids, 0, tris, act, track, tol, scale, tb, fe,
-                      rg, "2.4s", **kw), act, track, scale, rg
+    budget = ErrorBudget(tol, scale, math.sqrt(0.5) / scale, tb, fe, rg)
+    costs = groups.Costs(lambda m: len(group_open(m, t, "2.4s")), len(CLOSE), 24)
+    plan = groups.plan(sheet.xy, sheet.faces, sheet.part_ids, 0, tris, act, track, budget, costs, **kw)
+    return plan, act, track, scale, rg
 
 
 @pytest.mark.parametrize("tol", [0.25, 0.5])
 def test_composed_error_within_tolerance(sheet, tol):
     plan, act, track, scale, _ = _plan(sheet, tol)
     act = act[:, plan.order]
-    keys = keyframes.point_keys(plan.track, act, plan.radius)
+    keys = freeknots.point_keys(plan.track, act, plan.radius)
     q = np.rint(keys.values * scale) / scale  # what the file holds (integer viewBox units)
     played = keyframes.interpolate(keyframes.Keys(keys.mask, q, keys.first_active))
-    err = np.linalg.norm((rigid.compose_tracks(plan, played) - track[:, plan.order]).reshape(*act.shape, 3, 2),
+    err = np.linalg.norm((groups.compose_tracks(plan, played) - track[:, plan.order]).reshape(*act.shape, 3, 2),
                          axis=-1)
     assert plan.stats["groups"] >= 1 and plan.stats["grouped_paths"] > 0.25 * act.shape[1]
     assert err.max(axis=-1)[act].max() <= tol * (1 - 0.03)  # keyTimes rounding keeps its own share
     assert plan.stats["keys_rigid"] < 0.75 * plan.stats["keys_global"]
 
 
-def test_groups_open_and_close_in_pairs(sheet):
+def test_groups_are_disjoint_runs_of_one_band(sheet):
     plan, *_ = _plan(sheet, 0.25)
-    opens = sorted(plan.opens)
-    closes = sorted(plan.closes)
-    assert len(opens) == len(closes)
-    assert all(a <= b < c for a, b, c in zip(opens, closes, opens[1:] + [10 ** 9]))
+    runs = plan.groups.tolist()
+    assert runs and all(a < b <= c for (a, b), (c, _) in zip(runs, runs[1:] + [(10 ** 9, 0)]))
     grouped = np.zeros(len(plan.band), bool)
-    for a, b in zip(opens, closes):
-        grouped[a:b + 1] = True
-        assert len(set(plan.band[a:b + 1].tolist())) == 1
+    for a, b in runs:
+        grouped[a:b] = True
+        assert len(set(plan.band[a:b].tolist())) == 1
     assert ((plan.band >= 0) == grouped).all()
 
 
 def test_group_markup_plays_the_matrices_in_the_verifier(sheet):
-    from converter import verify
-
     plan, *_ = _plan(sheet, 0.25)
-    b = int(plan.band[min(plan.opens)])
+    b = int(plan.band[plan.groups[0, 0]])
     motion = plan.motions[b]
     t = motion.matrices.shape[0]
     scale = 7
-    text = rigid.group_open(rigid.band_motion(*_params(motion), scale=scale, kt_decimals=4), t, "2.4s")
+    text = group_open(groups.band_motion(*_params(motion), scale=scale, kt_decimals=4), t, "2.4s")
     svg = (f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {256 * scale} {256 * scale}" width="256" '
            f'height="256"><metadata id="facesvg">{{"frames": {t}, "fps": 25, "viewport": [256, 256]}}</metadata>'
            f'{text}<path id="f0" d="M{scale} 0L0 {scale}L0 0z"/></g></svg>').encode()
     ev = verify.evaluate(svg)
-    replay = rigid.band_motion(*_params(motion), scale=scale, kt_decimals=4).matrices
+    replay = groups.band_motion(*_params(motion), scale=scale, kt_decimals=4).matrices
     want = np.einsum("tij,vj->tvi", replay[:, :, :2], np.array([[1.0, 0], [0, 1], [0, 0]])) + replay[:, None, :, 2]
     assert np.abs(ev.xy[:, 0] - want).max() < 1e-6
 
 
 def _params(motion):
-    params = rigid.decompose(motion.matrices, np.zeros(2))
+    params = groups.decompose(motion.matrices, np.zeros(2))
     return params, motion.centroid, 50.0, 0.025
 
 
 def test_local_radius_shrinks_with_gain():
-    r = rigid.local_radius(0.25, np.array([1.0, 2.0]), 12, 0.0075, 1e-3)
+    r = ErrorBudget.split(0.25, 512).local_keys(np.array([1.0, 2.0]))
     assert r[1] < r[0] / 1.9
     assert (r > 0).all()
 

@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from converter import depth, extract
+from bench.order_measure import order_error
+from converter import extract
+from converter.encode import order
 from converter.animation import FaceAnimation, Part
 
 
@@ -26,24 +28,24 @@ def scene():
 
 def test_order_error_sees_a_wrong_fixed_order(scene):
     anim, sheet = scene
-    back_first = depth.DrawList(np.array([2, 3, 0, 1], np.int32), sheet.visible[:, [2, 3, 0, 1]])
-    big_first = depth.DrawList(np.array([0, 1, 2, 3], np.int32), sheet.visible[:, [0, 1, 2, 3]])
+    back_first = order.DrawList(np.array([2, 3, 0, 1], np.int32), sheet.visible[:, [2, 3, 0, 1]])
+    big_first = order.DrawList(np.array([0, 1, 2, 3], np.int32), sheet.visible[:, [0, 1, 2, 3]])
     # Early frames: the small square is behind, so drawing it last is wrong; late frames the reverse.
     early, late = [0, 1], [10, 11]
-    assert depth.order_error(anim.frames, sheet, back_first, early)["max"] < 0.02
-    assert depth.order_error(anim.frames, sheet, big_first, early)["max"] > 0.1
-    assert depth.order_error(anim.frames, sheet, big_first, late)["max"] < 0.02
-    assert depth.order_error(anim.frames, sheet, back_first, late)["max"] > 0.1
+    assert order_error(anim.frames, sheet, back_first, early)["max"] < 0.02
+    assert order_error(anim.frames, sheet, big_first, early)["max"] > 0.1
+    assert order_error(anim.frames, sheet, big_first, late)["max"] < 0.02
+    assert order_error(anim.frames, sheet, back_first, late)["max"] > 0.1
 
 
 def test_layer_copies_fix_the_crossing(scene):
     anim, sheet = scene
-    fixed = depth.draw_list(sheet)
-    layered = depth.layered(sheet)
+    fixed = order.draw_list(sheet)
+    layered = order.layered(sheet)
     frames = list(range(anim.n_frames))
     assert len(layered.triangles) > len(fixed.triangles) and layered.conflicts > 0
-    assert depth.order_error(anim.frames, sheet, fixed, frames)["max"] > 0.1
-    assert depth.order_error(anim.frames, sheet, layered, frames)["max"] < 0.02
+    assert order_error(anim.frames, sheet, fixed, frames)["max"] > 0.1
+    assert order_error(anim.frames, sheet, layered, frames)["max"] < 0.02
     # A triangle and its copy never show at the same frame.
     for t in np.unique(layered.triangles):
         assert layered.active[:, layered.triangles == t].sum(axis=1).max() <= 1

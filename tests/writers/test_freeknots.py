@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from converter import freeknots, parallel
-from converter import keyframes as kf
+from converter.encode import freeknots, parallel
+from converter.encode import keys as kf
 
 
 def max_error(keys, x, active):
@@ -33,7 +33,7 @@ def test_fewer_keys_than_sampled_keys_on_noisy_motion():
 
 def test_point_keys_keep_the_euclidean_bound():
     x, active = noisy_sines(n=30)
-    keys = kf.point_keys(x, active, 0.25)
+    keys = freeknots.point_keys(x, active, 0.25)
     err = np.linalg.norm((kf.interpolate(keys) - x).reshape(*x.shape[:2], 3, 2), axis=-1).max(axis=-1)
     assert within(err[active].max(), 0.25, x)
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from converter import freeknots
-from converter import keyframes as kf
+from converter.encode import freeknots
+from converter.encode import keys as kf
 
 
 def interp_error(keys, x, active):

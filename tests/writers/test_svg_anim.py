@@ -10,9 +10,12 @@ from lxml import etree
 from converter import extract
 from converter.animation import FaceAnimation, Part
 from converter.convert import convert_animation
+from converter.encode.budget import viewbox_scale
+from converter.encode.keys import interpolate
 from converter.options import ConversionOptions, Report
-from converter.verify import verify_animation
+from converter.verify import _triangle_of_d, verify_animation
 from converter.writers import svg_anim
+from converter.writers.svg_anim import _path_strings, offsets
 from verify.synth import grid
 
 SVG = "{http://www.w3.org/2000/svg}"
@@ -82,7 +85,7 @@ def test_bounded_default_is_small_static_shared_and_drops_never_visible():
     assert len(classes) < len(ps) / 3  # fills shared through CSS classes
     root = etree.fromstring(data)
     w, vb = float(root.get("width")), [float(x) for x in root.get("viewBox").split()]
-    assert vb[2] / w == svg_anim.viewbox_scale(0.25)
+    assert vb[2] / w == viewbox_scale(0.25)
     v = verify_animation(data, anim)
     assert v.ok, v.summary()
 
@@ -104,8 +107,6 @@ def test_colour_keys_stay_within_colour_tolerance():
     rgb = np.clip(0.5 + 0.3 * np.sin(t / rng.uniform(3, 20, (1, 25, 3))), 0, 1)
     active = rng.random((60, 25)) > 0.15
     keys = svg_anim.color_keys(rgb, active, 3.0)
-    from converter.keyframes import interpolate
-
     shown = interpolate(keys)
     assert np.abs(shown - rgb * 255)[active].max() <= 3.0 + 1e-9
     assert np.all(keys.values == np.rint(keys.values))
@@ -137,8 +138,6 @@ def test_raw_size_is_counted_exactly_without_writing():
 
 
 def test_offsets_shorten_keys_only_where_they_pay():
-    from converter.writers.svg_anim import _path_strings, offsets
-
     far = np.array([[1200 + k, -3400 - k, 1205 + k, -3394 - k, 1212 + k, -3386 - k] for k in range(30)])  # far away
     near = np.array([[3, 4, 5, 6, 7, 8], [4, 5, 5, 6, 7, 8]])  # two short keys: the attribute would cost more
     rows = np.concatenate([far, near])
@@ -148,7 +147,5 @@ def test_offsets_shorten_keys_only_where_they_pay():
     plain, moved = _path_strings(far), _path_strings(far, off[pk[: len(far)]])
     assert sum(map(len, moved)) < sum(map(len, plain)) - 30 * 4
     # The moved text plus its translate is the same triangle: parse both back.
-    from converter.verify import _triangle_of_d
-
     for a, b in zip(plain, moved):
         assert np.allclose(np.array(_triangle_of_d(a)), np.array(_triangle_of_d(b)) + np.tile(off[0], 3))

@@ -6,18 +6,19 @@ front can change from frame to frame. What we do and what we measured (bench/ben
 1. Back-face and frustum culling per frame (converter.extract) removes most overlaps: on a face, two
    front-facing triangles overlap only across a fold (nose over cheek when the head turns, lips over teeth,
    eyelids over the eyeballs). Culled triangles are hidden by the class animation at exactly those frames.
-2. The fixed order is the painter's order of the neutral frame (centroid NDC depth, back to front).
-   ``robust_order`` (mean depth over the frames where each triangle is visible) is the alternative we measured.
-3. ``layered`` (experimental, not the default): find pairs of triangles whose interiors overlap at some frame
-   (grid binning of screen boxes at sampled frames, separating-axis test, pairs sharing a vertex skipped),
-   decide which is nearer where they overlap (both depth planes compared at probe points inside both), and give
-   a triangle that must cover a later-drawn one a second path drawn after it, shown only at those frames while
-   the original is hidden there (animated visibility).
+2. The fixed order is the painter's order of the neutral frame (centroid NDC depth, back to front). The
+   alternative we measured, mean depth over the frames where each triangle is visible, is bench/order_measure.py's
+   ``robust_order``.
+3. ``layered`` (experimental, not the default): find pairs of triangles whose interiors overlap at some sampled
+   frame (converter.encode.overlap's pair search; pairs sharing a vertex skipped), decide which is nearer where
+   they overlap (both depth planes compared at probe points inside both), and give a triangle that must cover a
+   later-drawn one a second path drawn after it, shown only at those frames while the original is hidden there
+   (animated visibility).
 
-The error left is measured against a z-buffer with ``order_error``: pyrender renders triangle ids, resvg
-renders the same frame's SVG with ids as colours, and we count covered interior pixels (away from
-anti-aliased edges) whose front triangle differs. On the ICT faces (head turns up to +-40 degrees) the fixed
-neutral-frame order leaves under 0.3% of such pixels wrong, as a per-frame painter's sort would; the
+The error left is measured against a z-buffer (bench/order_measure.py, ``order_error``): pyrender renders
+triangle ids, resvg renders the same frame's SVG with ids as colours, and we count covered interior pixels
+(away from anti-aliased edges) whose front triangle differs. On the ICT faces (head turns up to +-40 degrees)
+the fixed neutral-frame order leaves under 0.3% of such pixels wrong, as a per-frame painter's sort would; the
 experimental layer copies fix a triangle crossing in front of another (tests) but made the faces worse, so
 the default is the fixed order; see BENCHMARKS.md for the figures.
 """
@@ -28,6 +29,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from converter.encode.overlap import overlap_pairs
 from converter.sheet import Sheet
 
 OVERLAP_MARGIN_PX = 0.25  # interiors must overlap by this much along every axis (neighbours only touch)
@@ -44,62 +46,17 @@ class DrawList(NamedTuple):
     residual: int = 0  # (pair, frame) conflicts left after the layer copies
 
 
-def robust_order(sheet: Sheet, tris: np.ndarray) -> np.ndarray:
-    """tris sorted back to front by mean centroid depth over the frames where each is visible (stable)."""
-    cen = sheet.depth[:, sheet.faces[tris]].mean(axis=2)  # (T, K)
-    vis = sheet.visible[:, tris]
-    mean = np.where(vis, cen, 0).sum(axis=0) / np.maximum(vis.sum(axis=0), 1)
-    return tris[np.argsort(-mean, kind="stable")].astype(np.int32)
-
-
-def _grid_pairs(lo: np.ndarray, hi: np.ndarray, cell: float) -> np.ndarray:
-    """(M, 2) index pairs whose boxes [lo, hi] (N, 2) share a grid cell (each pair once, i < j)."""
-    c0 = np.floor(lo / cell).astype(np.int64)
-    c1 = np.floor(hi / cell).astype(np.int64)
-    span = c1 - c0 + 1
-    n_cells = span[:, 0] * span[:, 1]
-    owner = np.repeat(np.arange(len(lo)), n_cells)
-    local = np.arange(n_cells.sum()) - np.repeat(np.cumsum(n_cells) - n_cells, n_cells)
-    sx = np.repeat(span[:, 0], n_cells)
-    cx = np.repeat(c0[:, 0], n_cells) + local % sx
-    cy = np.repeat(c0[:, 1], n_cells) + local // sx
-    key = (cx - cx.min()) * (cy.max() - cy.min() + 1) + (cy - cy.min())
-    order = np.lexsort((owner, key))
-    key, owner = key[order], owner[order]
-    out = []
-    for d in range(1, len(key)):
-        same = key[d:] == key[:-d]
-        if not same.any():
-            break
-        out.append(np.stack([owner[:-d][same], owner[d:][same]], axis=1))
-    if not out:
-        return np.zeros((0, 2), np.int64)
-    return np.concatenate(out)
-
-
 def overlapping_pairs(sheet: Sheet, tris: np.ndarray, frames: np.ndarray,
                       active: np.ndarray | None = None) -> np.ndarray:
-    """(M, 2) positions into tris (first < second) of paths whose interiors overlap at one of the frames
-    (both shown there); pairs sharing a vertex are left out."""
-    corners = sheet.xy[:, sheet.faces[tris]]
+    """(M, 2) positions into tris (first < second) of paths whose interiors overlap by more than
+    OVERLAP_MARGIN_PX at one of the frames (both shown there); pairs sharing a vertex are left out.
+
+    The pair search is converter.encode.overlap's, frame by frame (blocks of one frame) with a negative margin:
+    "within -m px" is "overlapping by more than m" along each separating axis."""
+    fr = np.asarray(frames, np.int64)
     shown = sheet.visible[:, tris] if active is None else active
     f = sheet.faces[tris]
-    found = []
-    for k in frames.tolist():
-        idx = np.flatnonzero(shown[k])
-        if len(idx) < 2:
-            continue
-        c = corners[k, idx].astype(np.float64)
-        lo, hi = c.min(axis=1), c.max(axis=1)
-        size = float(np.median((hi - lo).max(axis=-1)))
-        pairs = _grid_pairs(lo, hi, max(2 * size, 1.0))
-        gap = np.minimum(hi[pairs[:, 0]], hi[pairs[:, 1]]) - np.maximum(lo[pairs[:, 0]], lo[pairs[:, 1]])
-        pairs = pairs[(gap > OVERLAP_MARGIN_PX).all(axis=1)]
-        pairs = pairs[_overlap(c[pairs[:, 0]], c[pairs[:, 1]], OVERLAP_MARGIN_PX)]
-        found.append(idx[pairs])
-    if not found:
-        return np.zeros((0, 2), np.int64)
-    pairs = np.unique(np.sort(np.concatenate(found), axis=1), axis=0)
+    pairs = overlap_pairs(sheet.xy[fr][:, f], shown[fr], block=1, margin=-OVERLAP_MARGIN_PX)
     shared = (f[pairs[:, 0], :, None] == f[pairs[:, 1], None, :]).any(axis=(1, 2))
     return pairs[~shared]
 
@@ -223,53 +180,3 @@ def residual_conflicts(sheet: Sheet, dl: DrawList, frames: np.ndarray | None = N
     overlap, first_nearer = front_of(sheet, dl.triangles, pairs, frames)
     both = dl.active[frames][:, pairs[:, 0]] & dl.active[frames][:, pairs[:, 1]]
     return int((overlap & first_nearer & both).sum())
-
-
-def id_svg(sheet: Sheet, dl: DrawList, frame: int) -> str:
-    """A still SVG of one frame with every path filled by its triangle id + 1 as a colour, no anti-aliasing."""
-    show = dl.active[frame]
-    tris = dl.triangles[show]
-    ids = tris.astype(np.int64) + 1
-    xy = sheet.xy[frame][sheet.faces[tris]].reshape(-1, 6)
-    body = "".join(
-        f'<path d="M{r[0]:.3f} {r[1]:.3f}L{r[2]:.3f} {r[3]:.3f}L{r[4]:.3f} {r[5]:.3f}Z" fill="#{c:06x}"/>'
-        for r, c in zip(xy.tolist(), ((ids & 255) << 16 | ((ids >> 8) & 255) << 8 | (ids >> 16) & 255).tolist()))
-    w, h = sheet.camera.width, sheet.camera.height
-    return (f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" '
-            f'shape-rendering="crispEdges">{body}</svg>')
-
-
-def order_error(frames3d: np.ndarray, sheet: Sheet, dl: DrawList, which: list[int]) -> dict[str, float]:
-    """Share of the interior pixels (the z-buffer shows one triangle in their 3x3 neighbourhood) covered in both
-    renders whose front triangle in the painter's SVG (resvg, ids as colours) is not the z-buffer's (pyrender);
-    per-frame max and mean over the frames `which`."""
-    import io
-
-    import resvg_py
-    from PIL import Image
-
-    from converter import render
-
-    pyrender = render._pyrender()
-    f = sheet.faces.shape[0]
-    ids = np.arange(1, f + 1, dtype=np.int64)
-    rgba = np.stack([ids & 255, (ids >> 8) & 255, (ids >> 16) & 255, np.full(f, 255)], axis=1).astype(np.uint8)
-    fracs = []
-    with render.offscreen(sheet.camera.width, sheet.camera.height) as r:
-        for k in which:
-            scene = render._scene(sheet.camera)
-            scene.add(render._mesh(frames3d[k], sheet.faces, rgba, smooth=False))
-            color, _ = r.render(scene, flags=pyrender.RenderFlags.FLAT)
-            px = color.astype(np.int64)
-            ref = px[..., 0] | (px[..., 1] << 8) | (px[..., 2] << 16)
-            png = bytes(resvg_py.svg_to_bytes(svg_string=id_svg(sheet, dl, k)))
-            im = np.asarray(Image.open(io.BytesIO(png)).convert("RGBA")).astype(np.int64)
-            got = np.where(im[..., 3] > 0, im[..., 0] | (im[..., 1] << 8) | (im[..., 2] << 16), 0)
-            pad = np.pad(ref, 1, mode="edge")
-            interior = np.ones(ref.shape, bool)  # multisampling blends ids on edges: judge interior pixels only
-            for dy in range(3):
-                for dx in range(3):
-                    interior &= pad[dy:dy + ref.shape[0], dx:dx + ref.shape[1]] == ref
-            valid = interior & (ref > 0) & (ref <= f) & (got > 0)
-            fracs.append(float((got[valid] != ref[valid]).mean()) if valid.any() else 0.0)
-    return {"max": max(fracs), "mean": float(np.mean(fracs)), "frames": len(fracs)}

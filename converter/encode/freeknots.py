@@ -1,6 +1,6 @@
 """Free-knot keyframe reduction: key values anywhere within the bound, so each straight segment runs longer.
 
-``keyframes.reduce`` puts every key on a sampled value. Here a key's value is free: the segment from key j
+``keys.reduce`` puts every key on a sampled value. Here a key's value is free: the segment from key j
 (time s, value p) with velocity v passes within eps of active frame k iff ``|p + v (k - s) - x_k| <= eps``, a
 strip in the (p, v) plane, one plane per coordinate. The greedy keeps, per coordinate, the convex polygon of
 (p, v) that meets every active frame since s, with p restricted to the window of values key j can take given
@@ -12,23 +12,23 @@ window-propagating greedy for continuous piecewise-linear fitting under a max-no
 the file comes out a quarter smaller than with keys on sampled values (bench_capture).
 
 The loops do not vectorise (polygons grow and shrink per track), so they are compiled with numba.
+``point_keys`` turns a Euclidean bound on 2D points into per-coordinate ones (a few rectangles inscribed in the
+circle, the one needing fewest keys per track).
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+import math
 
 import numba
 import numpy as np
 
-from converter import parallel
-
-if TYPE_CHECKING:
-    from converter.keyframes import Keys
+from converter.encode import keys, parallel
 
 BIG = 1e7  # bound of the unconstrained first value and of every velocity (px, px/frame)
 MAX_VERTS = 40  # polygon capacity; a segment whose polygon would outgrow it is cut early (still valid)
 ON_LINE = 1e-10  # relative distance below which a polygon vertex counts as on a cutting line
+SHAPES_DEG = (45.0, 30.0, 60.0)  # per path, the rectangle in each vertex's tolerance circle that needs fewest keys
 SLACK = 1e-8  # the bound holds to eps + SLACK (eps + |x| + 1); tracks the final check rejects get sampled keys
 
 
@@ -223,10 +223,8 @@ def _reduce(x, active, eps, mask, values, bad, first, stop):
                     bad[j] = True
 
 
-def reduce_free(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray) -> Keys:
-    """Keys (keyframes.Keys) for tracks x (T, N, D) within eps per coordinate where active, with free key values."""
-    from converter import keyframes
-
+def reduce_free(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray) -> keys.Keys:
+    """Keys for tracks x (T, N, D) within eps per coordinate where active, with free key values."""
     x = np.ascontiguousarray(x, np.float64)
     t, n, d = x.shape
     active = np.ascontiguousarray(active, bool)
@@ -237,6 +235,24 @@ def reduce_free(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray) -> K
         parallel.threaded(_reduce, n, x, active, eps, mask, values, bad)
     first = np.where(active.any(axis=0), np.argmax(active, axis=0), -1)
     if bad.any():  # numerically awkward tracks: sampled keys, always valid
-        fb = keyframes.reduce(x[:, bad], active[:, bad], eps[bad])
+        fb = keys.reduce(x[:, bad], active[:, bad], eps[bad])
         mask[:, bad], values[:, bad] = fb.mask, fb.values
-    return keyframes.Keys(mask, values, first)
+    return keys.Keys(mask, values, first)
+
+
+def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
+               shapes: tuple[float, ...] | None = None) -> keys.Keys:
+    """Free-knot keys for tracks of 2D points xy (T, N, 2m), each point within Euclidean radius where active."""
+    shapes = SHAPES_DEG if shapes is None else shapes
+    m = xy.shape[2] // 2
+    r = np.broadcast_to(np.asarray(radius, np.float64), (xy.shape[1],))
+    best: keys.Keys | None = None
+    for a in np.radians(shapes):
+        # Half-widths r cos a (x) and r sin a (y): a rectangle inscribed in the circle. Captured jitter is
+        # rarely the same on both axes, so the shape that needs fewest keys differs from path to path.
+        s = np.tile([1 / math.cos(a), 1 / math.sin(a)], m)
+        k = reduce_free(xy * s, active, r)
+        k = k._replace(values=k.values / s)
+        best = k if best is None else keys.fewest(best, k)
+    assert best is not None, "no shapes"
+    return best

@@ -16,7 +16,7 @@ Each fit is robust least squares from the neutral frame, written as an SMIL tran
 
 which is exactly the QR decomposition of the affine map (rotation times upper-triangular), about the band's
 centroid (path coordinates are relative to it). Each parameter is keyframed on its own with
-``keyframes.reduce`` and rounded; SMIL interpolates the parameters linearly, so the *played* transform
+``keys.reduce`` and rounded; SMIL interpolates the parameters linearly, so the *played* transform
 between keys is not the fitted one.
 
 Why the bound still holds: the residual each path encodes is measured against the played transforms, not the
@@ -32,22 +32,27 @@ paths past each other where that cannot change a pixel (``overlap_pairs``: they 
 a frame where both are drawn), greedily continuing the current band, which merges many runs; ``plan`` then
 wraps only the runs whose saved keys outweigh the text of their transform stack, and leaves the others in the
 head's frame. When even the head group does not pay for itself, nothing is grouped.
+
+This module knows numbers and error budgets only: ``plan`` returns which runs to wrap and the played transforms,
+and the writer (converter.writers.svg_transforms) writes the markup. What text costs, the writer tells it
+through ``Costs``.
 """
 
 from __future__ import annotations
 
 import heapq
 import math
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 import numpy as np
 from scipy import sparse
 from scipy.cluster.vq import kmeans2
 from scipy.sparse.csgraph import connected_components
 
-from converter import keyframes
-from converter.overlap import overlap_pairs
-from converter.svgtext import number as svg_number
+from converter.encode import freeknots
+from converter.encode import keys as keyframes
+from converter.encode.budget import ErrorBudget
+from converter.encode.overlap import overlap_pairs
 
 HEAD_CLUSTERS = 24  # motion clusters of the largest band (the head)
 CLUSTER_MIN_TRIANGLES = 50  # fewer clusters on small heads: at least this many triangles each
@@ -62,7 +67,7 @@ HUBER_PX = 1.0  # scale of the robust (Cauchy) weights in the affine fit
 FIT_ITERATIONS = 3
 EVERY_FRAME_SHARE = 0.8  # when keyframing keeps more frames than this share, write every frame (no keyTimes)
 PLAIN_SAMPLE = 4  # the plain key count that decides whether groups pay is estimated on every 4th path
-BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime)
+TIME_DECIMALS = 4  # keyTimes of the transform animations are played (and so written) rounded to these decimals
 
 
 class TransformAnim(NamedTuple):
@@ -81,6 +86,16 @@ class BandMotion(NamedTuple):
     anims: tuple[TransformAnim, ...]
     matrices: np.ndarray  # float64 (T, 2, 3) local px -> viewport px, as the browser plays it at frame times
     gain: float  # max over frames of the largest singular value of the linear part (local -> global error)
+    time_decimals: int  # keyTimes (fractions of the loop) are rounded to these decimals, as the matrices play them
+
+
+class Costs(NamedTuple):
+    """Bytes the writer's syntax spends on what the planner weighs: a group with its transform stack opened, a
+    group closed, one path key. The planner wraps a run in a group only where the keys it saves pay for it."""
+
+    transform: Callable[[BandMotion], int]
+    close: int
+    key: float
 
 
 class Layout(NamedTuple):
@@ -102,15 +117,13 @@ class Plan(NamedTuple):
     order: np.ndarray  # int (P,) new document order of the input paths
     track: np.ndarray  # float64 (T, P, 6) px to encode per path: local (in a group) or global (plain)
     radius: np.ndarray  # float64 (P,) Euclidean px the keyframing of each path may use
-    opens: dict[int, str]  # path index (new order) -> '<g>' + transform stack written before it
-    closes: frozenset[int]  # path indices (new order) after which a '</g>' closes the run
+    groups: np.ndarray  # int (G, 2) first and one-past-last path (new order) of each run wrapped in its band's group
     band: np.ndarray  # int (P,) band of each path in the new order, -1 when plain (no group)
     gain: np.ndarray  # float64 (P,) local -> global error gain of each path (1 when plain)
     motions: tuple[BandMotion, ...]  # per band: the played transform
     stats: dict[str, float]
-    keys: keyframes.Keys | None  # the keyframes of track within radius (keyframes.point_keys); None without groups
-    head: BandMotion | None  # the outermost group's transform (None: no groups at all)
-    outer: str  # '<g>' and the head's transform stack, opened before the first path
+    keys: keyframes.Keys | None  # the keyframes of track within radius (freeknots.point_keys); None without groups
+    head: BandMotion | None  # the outermost group's transform, around every path (None: no groups at all)
 
 
 # --- bands ---------------------------------------------------------------------------------------------------
@@ -250,16 +263,17 @@ def _decimals(step: float) -> int:
     return int(np.clip(math.ceil(-math.log10(max(2 * step, 1e-12))), 0, 8))
 
 
-def band_motion(params: np.ndarray, center: np.ndarray, radius: float, budget: float, scale: int,
-                kt_decimals: int) -> BandMotion:
-    """Keyframed, rounded transform stack for fitted parameters (T, 6) about center; radius: band extent px."""
+def band_motion(params: np.ndarray, center: np.ndarray, radius: float, slack: float, scale: int,
+                kt_decimals: int = TIME_DECIMALS) -> BandMotion:
+    """Keyframed, rounded transform stack for fitted parameters (T, 6) about center; radius: band extent px;
+    slack: px the keyframing may leave to the residual; translate is kept in units of 1/scale px."""
     t = len(params)
     radius = max(radius, 1.0)
-    # Per-parameter bound so each moves a point of the band by at most budget / 4 px.
-    per = budget / 4
+    # Per-parameter bound so each moves a point of the band by at most slack / 4 px.
+    per = slack / 4
     eps = np.array([per, per, math.degrees(per / radius), math.degrees(per / radius), per / radius, per / radius])
     # Rounding of the written values: small against the slack so the residual does not pick up rounding noise.
-    r = budget / 4
+    r = slack / 4
     rounding = {"translate": r, "rotate": math.degrees(r / radius), "skewX": math.degrees(r / radius),
                 "scale": r / radius}
     identity = np.array([0, 0, 0, 0, 1, 1.0])
@@ -292,7 +306,7 @@ def band_motion(params: np.ndarray, center: np.ndarray, radius: float, budget: f
         anims.append(TransformAnim(kind, kf, vals, dec))
     mats = compose(played, np.zeros(2))
     gain = float(np.linalg.svd(mats[:, :, :2], compute_uv=False).max()) if t else 1.0
-    return BandMotion(np.asarray(center, np.float64), tuple(anims), mats, gain)
+    return BandMotion(np.asarray(center, np.float64), tuple(anims), mats, gain, kt_decimals)
 
 
 def local_tracks(xy_paths: np.ndarray, mats: np.ndarray) -> np.ndarray:
@@ -337,17 +351,18 @@ def reorder(band: np.ndarray, pairs: np.ndarray) -> np.ndarray:
 
 # --- layout and plan --------------------------------------------------------------------------------------------
 def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
-           tris: np.ndarray, active: np.ndarray, tolerance: float, scale: int, kt_decimals: int = 4,
+           tris: np.ndarray, active: np.ndarray, budget: ErrorBudget, kt_decimals: int = TIME_DECIMALS,
            head_clusters: int = HEAD_CLUSTERS, merge_runs: bool = True) -> Layout:
     """Head motion, bands, played transforms, run order and local tracks for paths tris (P,) shown where
     active (T, P).
 
-    xy (T, V, 2) px comes from the Sheet; tolerance px is the global bound the residual encoder works to (the
-    transforms take HEAD_SHARE and BAND_SHARE of it as fitting slack, not as error). The head's transform is
+    xy (T, V, 2) px comes from the Sheet; budget.tolerance px is the global bound the residual encoder works to
+    (the transforms take HEAD_SHARE and BAND_SHARE of it as fitting slack, not as error). The head's transform is
     fitted on the screen positions and keyed tightly (it carries the capture's pose jitter, every frame, once
     for the whole document); each band's transform is fitted in the head's frame, where what is left is
     smooth, and keyed loosely, since every run of the band repeats it."""
     t = xy.shape[0]
+    tolerance, scale = budget.tolerance, budget.scale
     xy64 = xy.astype(np.float64)
     small = max(SMALL_BAND_TRIANGLES, int(SMALL_BAND_SHARE * len(faces)))
     merged = merge_by_motion(components(faces, part_ids), faces, xy64, neutral, MERGE_PX, small)
@@ -377,83 +392,52 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
                   path_head.reshape(t, len(tris), 6))
 
 
-def _motion(xy: np.ndarray, verts: np.ndarray, neutral: int, budget: float, scale: int,
+def _motion(xy: np.ndarray, verts: np.ndarray, neutral: int, slack: float, scale: int,
             kt_decimals: int) -> BandMotion:
     """The played transform of the vertices verts of xy (T, V, 2), fitted from the neutral frame."""
     ref = xy[neutral, verts]
     center = ref.mean(axis=0)
     radius = float(np.linalg.norm(ref - center, axis=1).max()) if len(verts) else 1.0
     params = decompose(fit_affine(ref - center, xy[:, verts]), np.zeros(2))
-    return band_motion(params, center, radius, budget, scale, kt_decimals)
+    return band_motion(params, center, radius, slack, scale, kt_decimals)
 
 
-def group_open(motion: BandMotion, n_frames: int, dur: str, kt_decimals: int = 4) -> str:
-    """'<g>' plus the band's animateTransform stack (additive sum, in document order) for one run; a static
-    translate on the group takes the median position out of the translate values (shorter numbers)."""
-    out = ["<g>"]
-    q = 10 ** kt_decimals
-    for a in motion.anims:
-        values = a.values
-        if a.kind == "translate" and len(values) > 1:
-            # A static translate on the group holds the typical position; the (summed) animation only the rest.
-            base = np.rint(np.median(values, axis=0)).astype(np.int64)
-            out[0] = f'<g transform="translate({base[0]} {base[1]})">'
-            values = values - base
-        vals = ";".join(" ".join(svg_number(v, a.decimals) for v in row) for row in values.tolist())
-        head = f'<animateTransform attributeName="transform" type="{a.kind}" additive="sum" dur="{dur}" '
-        if len(a.frames) == 1 or len(a.frames) == n_frames + 1:  # a set, or evenly spaced: no keyTimes
-            out.append(f'{head}repeatCount="indefinite" values="{vals}"/>')
-            continue
-        kt = ";".join(svg_number(u / q, kt_decimals) for u in np.rint(a.frames * q / n_frames).astype(np.int64).tolist())
-        out.append(f'{head}repeatCount="indefinite" keyTimes="{kt}" values="{vals}"/>')
-    return "".join(out)
-
-
-def local_radius(tolerance: float, gain: np.ndarray, scale: int, time_budget: float, float_err: float) -> np.ndarray:
-    """Per path the Euclidean px the local keyframing may use so the composed error stays within tolerance.
-
-    Local coordinates are rounded to the 1/scale grid (at most sqrt(1/2)/scale local px), then mapped by the
-    played linear part (gain >= sigma_max): gain * (radius + rounding) + time_budget + float_err <= tolerance."""
-    g = np.maximum(np.asarray(gain, np.float64), 1e-9)
-    return (tolerance - time_budget - float_err) / g - math.sqrt(0.5) / scale
-
-
-def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
-         tris: np.ndarray, active: np.ndarray, track: np.ndarray, tolerance: float, scale: int,
-         time_budget: float, float_err: float, global_radius: float, dur: str,
+def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, tris: np.ndarray,
+         active: np.ndarray, track: np.ndarray, budget: ErrorBudget, costs: Costs,
          head_clusters: int = HEAD_CLUSTERS, merge_runs: bool = True) -> Plan:
     """Rigid layout for the bounded encoder: the head group around everything, which runs of paths go under a
     band's group inside it, and their tracks.
 
-    A run is wrapped only when the keys it saves (band-local against head-local keyframe counts, at
-    BYTES_PER_KEY) outweigh the text of its transform stack; the other paths sit in the head's frame. When even
-    that costs more than the plain encoding (global keys), nothing is grouped."""
+    A run is wrapped only when the keys it saves (band-local against head-local keyframe counts, at costs.key
+    bytes each) outweigh its group (costs.transform of its band plus costs.close); the other paths sit in the
+    head's frame. When even that costs more than the plain encoding (global keys), nothing is grouped."""
     t, p = active.shape
-    lay = layout(xy, faces, part_ids, neutral, tris, active, tolerance, scale, head_clusters=head_clusters,
+    lay = layout(xy, faces, part_ids, neutral, tris, active, budget, head_clusters=head_clusters,
                  merge_runs=merge_runs)
     act = active[:, lay.order]
     glob = track[:, lay.order]
-    r_local = local_radius(tolerance, lay.gain, scale, time_budget, float_err)
-    r_head = float(local_radius(tolerance, np.array([lay.head.gain]), scale, time_budget, float_err)[0])
+    global_radius = budget.keys
+    r_local = budget.local_keys(lay.gain)
+    r_head = float(budget.local_keys(np.array([lay.head.gain]))[0])
     ok = r_local > 0.05 * global_radius  # a band that magnifies errors too much is not worth it
 
     def keys_of(x, r, cols=slice(None)):
         # Squares only: which paths to wrap is decided on these; the other shapes refine the chosen tracks below.
-        return keyframes.point_keys(x[:, cols], act[:, cols], np.broadcast_to(np.maximum(r, 1e-6), (p,))[cols],
-                                    keyframes.SHAPES_DEG[:1])
+        return freeknots.point_keys(x[:, cols], act[:, cols], np.broadcast_to(np.maximum(r, 1e-6), (p,))[cols],
+                                    freeknots.SHAPES_DEG[:1])
 
     kh = keys_of(lay.head_local, r_head)
     kh_n = kh.mask.sum(axis=0)
-    texts = [group_open(m, t, dur) for m in lay.motions]
+    group_bytes = [costs.transform(m) for m in lay.motions]
     runs = list(zip(lay.runs[:-1].tolist(), lay.runs[1:].tolist()))
 
-    def pays(a: int, saved_bytes: float) -> bool:  # wrapping run a..: its band's transform text, once more
-        return bool(ok[a]) and saved_bytes > len(texts[int(lay.band[a])]) + 4
+    def pays(a: int, saved_bytes: float) -> bool:  # wrapping run a..: its band's group, once more
+        return bool(ok[a]) and saved_bytes > group_bytes[int(lay.band[a])] + costs.close
 
     # A run saves at most its head-local keys: band-local keys are worked out only where that could pay.
     maybe = np.zeros(p, bool)
     for a, b in runs:
-        maybe[a:b] = pays(a, kh_n[a:b].sum() * BYTES_PER_KEY)
+        maybe[a:b] = pays(a, kh_n[a:b].sum() * costs.key)
     cand = np.flatnonzero(maybe)
     kl = keys_of(lay.local, r_local, cand)
     kl_n = kh_n.copy()
@@ -461,27 +445,25 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
     # The plain encoding's key count only decides whether grouping pays: estimated from every PLAIN_SAMPLE-th path.
     sample = np.arange(0, p, PLAIN_SAMPLE if p >= 50 * PLAIN_SAMPLE else 1)
     plain_keys = int(round(keys_of(glob, global_radius, sample).mask.sum() * p / len(sample)))
-    saved = (kh_n - kl_n) * BYTES_PER_KEY
-    opens: dict[int, str] = {}
-    closes = set()
+    saved = (kh_n - kl_n) * costs.key
+    wrapped_runs = []
     wrapped = np.zeros(p, bool)
     for a, b in runs:
         if pays(a, saved[a:b].sum()):
-            opens[a] = texts[int(lay.band[a])]
-            closes.add(b - 1)
+            wrapped_runs.append((a, b))
             wrapped[a:b] = True
-    outer = group_open(lay.head, t, dur)
+    head_bytes = costs.transform(lay.head)
     n_keys = np.where(wrapped, kl_n, kh_n)
-    grouped_cost = int(n_keys.sum()) * BYTES_PER_KEY + len(outer) + sum(len(texts[int(lay.band[a])]) for a in opens)
-    stats = {"bands": len(lay.motions), "runs": len(lay.runs) - 1, "groups": len(opens),
+    transform_bytes = head_bytes + sum(group_bytes[int(lay.band[a])] for a, _ in wrapped_runs)
+    grouped_cost = int(n_keys.sum()) * costs.key + transform_bytes
+    stats = {"bands": len(lay.motions), "runs": len(lay.runs) - 1, "groups": len(wrapped_runs),
              "grouped_paths": int(wrapped.sum()), "keys_global": plain_keys,
              "max_gain": float(max(lay.gain.max(), lay.head.gain)) if p else 1.0}
-    if grouped_cost >= plain_keys * BYTES_PER_KEY:  # the plain encoding is shorter: no groups
+    if grouped_cost >= plain_keys * costs.key:  # the plain encoding is shorter: no groups
         stats.update(groups=0, grouped_paths=0, transform_bytes=0, keys_rigid=plain_keys)
-        return Plan(lay.order, glob, np.full(p, global_radius), {}, frozenset(), np.full(p, -1), np.ones(p),
-                    lay.motions, stats, None, None, "<g>")
-    stats.update(transform_bytes=len(outer) + sum(len(texts[int(lay.band[a])]) for a in opens),
-                 keys_rigid=int(n_keys.sum()))
+        return Plan(lay.order, glob, np.full(p, global_radius), np.zeros((0, 2), np.int64), np.full(p, -1),
+                    np.ones(p), lay.motions, stats, None, None)
+    stats.update(transform_bytes=transform_bytes, keys_rigid=int(n_keys.sum()))
     out_track = np.where(wrapped[None, :, None], lay.local, lay.head_local)
     radius = np.where(wrapped, r_local, r_head)
     band = np.where(wrapped, lay.band, -1)
@@ -490,10 +472,10 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
     w = np.flatnonzero(wrapped)
     at = np.searchsorted(cand, w)
     keys.mask[:, w], keys.values[:, w] = kl.mask[:, at], kl.values[:, at]
-    if len(keyframes.SHAPES_DEG) > 1:
-        keys = keyframes.fewest(keys, keyframes.point_keys(out_track, act, radius, keyframes.SHAPES_DEG[1:]))
-    return Plan(lay.order, out_track, radius, opens, frozenset(closes), band, gain, lay.motions, stats, keys,
-                lay.head, outer)
+    if len(freeknots.SHAPES_DEG) > 1:
+        keys = keyframes.fewest(keys, freeknots.point_keys(out_track, act, radius, freeknots.SHAPES_DEG[1:]))
+    return Plan(lay.order, out_track, radius, np.array(wrapped_runs, np.int64).reshape(-1, 2), band, gain,
+                lay.motions, stats, keys, lay.head)
 
 
 def compose_tracks(plan_: Plan, local: np.ndarray) -> np.ndarray:
@@ -511,16 +493,3 @@ def compose_tracks(plan_: Plan, local: np.ndarray) -> np.ndarray:
     if plan_.head is not None:
         apply(plan_.head, np.arange(p))
     return out
-
-
-def plan_for(sheet, options, tris: np.ndarray, active: np.ndarray, track: np.ndarray, dur: str) -> Plan:
-    """``plan`` with the bounded SVG encoder's budgets (converter.writers.svg_anim) for these options."""
-    from converter.writers import svg_anim
-
-    tol = options.tolerance
-    scale = svg_anim.viewbox_scale(tol)
-    time_budget = svg_anim.TIME_SHARE * tol
-    float_err = 1e-4 + 2e-7 * max(sheet.camera.width, sheet.camera.height)  # as svg_anim._encode_keyed
-    radius = tol - math.sqrt(0.5) / scale - time_budget - float_err
-    return plan(sheet.xy, sheet.faces, sheet.part_ids, sheet.neutral, tris, active, track, tol, scale,
-                time_budget, float_err, radius, dur)

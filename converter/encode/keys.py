@@ -16,16 +16,17 @@ keyTimes end at 1) and its value is free: any velocity in the final box extrapol
 velocity is preferred, so a track that never moves beyond ``eps`` comes out as two equal keys (static).
 
 Keys on sampled values are what the transform stacks and the exact (``--raw``) encoding need. Paths' vertices
-and colours use ``converter.freeknots`` instead, whose key values are free within the bound (fewer keys);
-``point_keys`` turns a Euclidean bound on 2D points into its per-coordinate one.
+and colours use ``converter.encode.freeknots`` instead, whose key values are free within the bound (fewer keys)
+and which falls back on ``reduce`` here for the few tracks its compiled pass rejects.
 """
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np
+from scipy import sparse
+from scipy.linalg import solveh_banded
 
 
 class Keys(NamedTuple):
@@ -117,29 +118,6 @@ def interpolate(keys: Keys, frames: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
-SHAPES_DEG = (45.0, 30.0, 60.0)  # per path, the rectangle in each vertex's tolerance circle that needs fewest keys
-
-
-def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
-               shapes: tuple[float, ...] | None = None) -> Keys:
-    """Free-knot keys for tracks of 2D points xy (T, N, 2m), each point within Euclidean radius where active."""
-    from converter import freeknots
-
-    shapes = SHAPES_DEG if shapes is None else shapes
-    m = xy.shape[2] // 2
-    r = np.broadcast_to(np.asarray(radius, np.float64), (xy.shape[1],))
-    best: Keys | None = None
-    for a in np.radians(shapes):
-        # Half-widths r cos a (x) and r sin a (y): a rectangle inscribed in the circle. Captured jitter is
-        # rarely the same on both axes, so the shape that needs fewest keys differs from path to path.
-        s = np.tile([1 / math.cos(a), 1 / math.sin(a)], m)
-        k = freeknots.reduce_free(xy * s, active, r)
-        k = k._replace(values=k.values / s)
-        best = k if best is None else fewest(best, k)
-    assert best is not None, "no shapes"
-    return best
-
-
 def fewest(a: Keys, b: Keys) -> Keys:
     """Per track the keys of a or b, whichever has fewer (a on ties)."""
     win = b.mask.sum(axis=0) < a.mask.sum(axis=0)
@@ -148,8 +126,6 @@ def fewest(a: Keys, b: Keys) -> Keys:
 
 def _hat(n_frames: int, n_keys: int):
     """Sparse (T, n) matrix of linear interpolation from n evenly spaced keys over [0, T] to frames 0..T-1."""
-    from scipy import sparse
-
     h = n_frames / (n_keys - 1)
     k = np.arange(n_frames)
     i = np.minimum(np.floor(k / h).astype(np.int64), n_keys - 2)
@@ -164,8 +140,6 @@ def uniform_fit(x: np.ndarray, active: np.ndarray, n_keys: int, scale: float,
     """Evenly spaced keys (no keyTimes needed) for tracks x (T, N, D), least-squares fitted and rounded to the
     1/scale grid. Returns integer key values (n_keys, N, D) and whether every track stays within radius of x at
     every active frame, rounding included: Euclidean per 2D point when pairs, else per coordinate."""
-    from scipy.linalg import solveh_banded
-
     t, n, d = x.shape
     a = _hat(t, n_keys)
     lam = 1e-6  # keys without frames (none between the last frame and the loop end) hold the sampled value

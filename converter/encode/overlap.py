@@ -1,4 +1,4 @@
-"""Which paths may touch on screen: the pairs whose drawing order must be kept (converter.rigid.reorder).
+"""Which paths may touch on screen: the pairs whose drawing order must be kept (converter.encode.groups.reorder).
 
 Two paths that never come within a stroke's spill of each other in a frame where both are drawn can be drawn
 in either order without changing a pixel. ``overlap_pairs`` finds the others: candidates from a uniform grid of
@@ -12,7 +12,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from converter import parallel
+from converter.encode import parallel
 
 OVERLAP_BLOCK = 8  # frames per block of the bounding-box candidate search
 PAIR_BITMAP_MAX = 1 << 26  # path pairs deduplicated through a bitmap up to this many (8k paths, 64 MB)
@@ -30,7 +30,8 @@ def _span(tri, nx, ny):
 
 @numba.njit(cache=True, nogil=True)
 def _apart(ta, tb, margin) -> bool:
-    """Triangles ta, tb (3, 2) are more than margin apart along one of their 6 edge normals."""
+    """Triangles ta, tb (3, 2) are more than margin apart along one of their 6 edge normals (a negative margin:
+    overlap by less than -margin there)."""
     for side in range(2):
         tri = ta if side == 0 else tb
         for i in range(3):
@@ -39,7 +40,9 @@ def _apart(ta, tb, margin) -> bool:
             ny = tri[k, 0] - tri[i, 0]
             a_lo, a_hi = _span(ta, nx, ny)
             b_lo, b_hi = _span(tb, nx, ny)
-            if max(b_lo - a_hi, a_lo - b_hi) > margin * np.sqrt(nx * nx + ny * ny):
+            # Gap of the two projections (minus their overlap): beyond the edge test's gap when one projection
+            # holds the other, which only a negative margin (interiors overlapping by -margin) can see.
+            if max(a_lo, b_lo) - min(a_hi, b_hi) > margin * np.sqrt(nx * nx + ny * ny):
                 return True
     return False
 
@@ -137,8 +140,9 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP
     margin / 2, the stroke's spill) meet, found through a uniform grid. Each candidate is then tested in the
     frames of the block where both are drawn: their boxes, then the separating-axis test (``apart``). A pair is
     kept unless every such frame shows it apart, so the result is conservative. A pair found in one block is not
-    tested again. With band (P,), only pairs of different bands are returned (``reorder`` keeps each band's own
-    order anyway). On the capture-like face this exact test halves the runs the box test alone leaves."""
+    tested again. A negative margin asks for pairs whose interiors overlap by more than -margin along every axis
+    (converter.encode.order). With band (P,), only pairs of different bands are returned (``reorder`` keeps each
+    band's own order anyway). On the capture-like face this exact test halves the runs the box test alone leaves."""
     t, p = active.shape
     xy32 = np.asarray(xy_paths, np.float32)
     m32 = np.float32(margin)

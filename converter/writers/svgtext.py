@@ -1,0 +1,42 @@
+"""Number text for SVG attributes: the shortest form that parses back to the rounded value, and keyTimes."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def number(x: float, decimals: int) -> str:
+    """x rounded to decimals, without trailing zeros or a leading zero ('.25', '-.5', '3', '0')."""
+    s = f"{x:.{decimals}f}"
+    if "." in s:
+        s = s.rstrip("0").rstrip(".")
+    if s.startswith("0."):
+        s = s[1:]
+    elif s.startswith("-0."):
+        s = "-" + s[2:]
+    return "0" if s in ("-0", "", "-") else s
+
+
+def key_times(frames: np.ndarray, n_frames: int, decimals: int | np.ndarray, snap: str = "nearest") -> list[str]:
+    """keyTimes text of each frame index (frame k at k / T) with decimals (one, or one per frame).
+
+    snap says how a time falls on the decimals' grid: 'nearest' rounds; a discrete change must show at frame k
+    however a player rounds its clock, so 'early' puts it half a frame early ((k - 1/2) / T, rounded) and
+    'floor' rounds down. Each distinct (frame, decimals) is formatted once."""
+    frames = np.asarray(frames, np.int64)
+    dec = np.broadcast_to(np.asarray(decimals, np.int64), frames.shape)
+    out = np.empty(len(frames), object)
+    for d in np.unique(dec).tolist():
+        sel = dec == d
+        uniq, inv = np.unique(frames[sel], return_inverse=True)
+        q = 10**d
+        if snap == "floor":
+            units = (uniq * q) // n_frames
+        elif snap == "early":
+            units = np.rint(np.maximum(uniq - 0.5, 0.0) * q / n_frames).astype(np.int64)
+        elif snap == "nearest":
+            units = np.rint(uniq * q / n_frames).astype(np.int64)
+        else:
+            raise ValueError(f"unknown snap {snap!r}")
+        out[sel] = np.asarray([number(u / q, d) for u in units.tolist()], object)[inv]
+    return out.tolist()
