@@ -15,6 +15,7 @@ from lxml import html
 from converter import outputs
 from converter.cli import build_parser, main
 from converter.convert import convert
+from converter.errors import InputError
 from converter.options import ConversionOptions
 from converter.outputs import OutputFile, OutputKind
 from web.conftest import glb_bytes, make_app
@@ -122,14 +123,14 @@ def test_every_option_is_in_the_upload_form_with_its_default_choices_and_range(w
 def test_validation_follows_the_same_ranges_and_choices():
     for e in expected_fields():
         if e["choices"] is not None and e["name"] != "to":
-            with pytest.raises(Exception, match="choose one of"):
+            with pytest.raises(InputError, match="choose one of"):
                 ConversionOptions(**{e["name"]: "no-such-choice"})
         if e["max"] is not None:
-            with pytest.raises(Exception, match="must be"):
+            with pytest.raises(InputError, match="must be"):
                 ConversionOptions(**{e["name"]: e["max"] + 1})
             ConversionOptions(**{e["name"]: e["max"]})
         if e["min"] is not None:
-            with pytest.raises(Exception, match="must be"):
+            with pytest.raises(InputError, match="must be"):
                 ConversionOptions(**{e["name"]: e["min"] - 1 if not e["exclusive"] else e["min"]})
 
 
