@@ -31,8 +31,8 @@ def ict_face():
     """The ICT head as a one-frame FaceAnimation, its FDP and the engine's deformation."""
     from converter.animation import FaceAnimation
     from converter.formats.ictfacekit import load_ict_head
+    from converter.mpeg4 import fat2d
     from converter.mpeg4.fdp import load_fdp
-    from converter.writers import fap2d
 
     head = load_ict_head(ICT)
     anim = FaceAnimation(head.vertices[None], head.faces, head.part_ids, head.parts, 25.0, "ict")
@@ -44,7 +44,7 @@ def ict_face():
 
         fdp = ict_fdp(ICT)
     neutral = head.vertices.astype(np.float64)
-    return anim, fdp, fap2d.engine_deform(anim, fdp, neutral)
+    return anim, fdp, fat2d.engine_deform(anim, fdp, neutral)
 
 
 def simplified_faces(anim, target_visible: int) -> np.ndarray:
@@ -109,24 +109,25 @@ def browser():
 def sample_face():
     """The bundled sample face (frame 0, undriven), its FDP and the engine's deformation."""
     from converter import formats
+    from converter.mpeg4 import fat2d
     from converter.mpeg4.fdp import load_fdp
-    from converter.writers import fap2d
 
     anim = formats.load(ROOT / "samples" / "face.glb").sliced(0, 1)
     neutral = anim.frames[0].astype(np.float64)
     fdp = load_fdp(ROOT / "samples" / "face.fdp.json", neutral)
-    return anim, fdp, fap2d.engine_deform(anim, fdp, neutral)
+    return anim, fdp, fat2d.engine_deform(anim, fdp, neutral)
 
 
 def fidelity(b, label, anim, deform, stream, pkg, data) -> tuple:
     """SSIM of the player's frames vs the 3D prerender (with and without head rotation) and vs the reference."""
     from PIL import Image
 
-    from converter import fap2d_render
-    from converter.camera import Camera
     from player import player_frame, player_page
+    from reference_render import load_package, render_stream_frame
 
-    ref = fap2d_render.load_package(data)
+    from converter.camera import Camera
+
+    ref = load_package(data)
     camera = Camera.from_json(pkg.manifest["camera"])
     no_head = stream.values.copy()
     no_head[:, 47:50] = 0.0
@@ -140,7 +141,7 @@ def fidelity(b, label, anim, deform, stream, pkg, data) -> tuple:
             s_full.append(ssim_rgba(shown, with_head[k]))
             s_box.append(ssim_rgba(shown, with_head[k], box))
             s_nohead.append(ssim_rgba(shown, without_head[k], box))
-            s_ref.append(ssim_rgba(shown, fap2d_render.render_stream_frame(ref, k)))
+            s_ref.append(ssim_rgba(shown, render_stream_frame(ref, k)))
             if k == 60:
                 img = np.concatenate([shown, with_head[k], without_head[k]], axis=1)
                 name = label.split(",")[0].replace(" ", "_")
@@ -160,7 +161,8 @@ def frame_rate(b, data, n: int, runs: int, fps_runs: int) -> dict:
 
 
 def run() -> str:
-    from converter.mpeg4.fap import read_fap, write_fap
+    from converter.mpeg4 import fat2d
+    from converter.mpeg4.fap import read_fap
     from converter.options import ConversionOptions
     from converter.writers import fap2d
 
@@ -177,14 +179,14 @@ def run() -> str:
     for path in sorted(XFACE.glob("*.fap")):
         stream = read_fap(path)
         t = time.perf_counter()
-        pkg = fap2d.build_package(anim, fdp, stream, write_fap(stream), deform, options, mesh_faces=low)
+        pkg = fap2d.package(fat2d.build(anim, fdp, stream, deform, options, mesh_faces=low))
         build_s.append(time.perf_counter() - t)
         packages[path.stem] = (stream, pkg, fap2d.package_zip(pkg))
     joy = read_fap(XFACE / "joy.fap")
-    full_pkg = fap2d.build_package(anim, fdp, joy, write_fap(joy), deform, options)
+    full_pkg = fap2d.package(fat2d.build(anim, fdp, joy, deform, options))
     full_zip = fap2d.package_zip(full_pkg)
     s_anim, s_fdp, s_deform = sample_face()
-    s_pkg = fap2d.build_package(s_anim, s_fdp, joy, write_fap(joy), s_deform, options)
+    s_pkg = fap2d.package(fat2d.build(s_anim, s_fdp, joy, s_deform, options))
     s_zip = fap2d.package_zip(s_pkg)
 
     pw, b = browser()
@@ -218,7 +220,7 @@ def run() -> str:
                  "the frames. *Face box*: the box around the visible feature points. *No head rotation*: the 3D "
                  "prerender with FAPs 48-50 zeroed, which the 2D package drops by design (the chapter's rule), so "
                  "this column isolates the 2D warping error from the dropped head motion. Last column: the same "
-                 "player frames vs the Python reference renderer (converter/fap2d_render.py).")
+                 "player frames vs the Python reference renderer (tests/fap2d/reference_render.py).")
     lines.append("")
     lines.append("| face, stream, 2D mesh | triangles | whole image | face box | face box, no head rotation | player vs Python reference |")
     lines.append("|---|---:|---:|---:|---:|---:|")

@@ -118,7 +118,7 @@ def resvg_frame(svg: bytes, zoom: float = 1.0) -> np.ndarray:
 def timed_write(sheet, options, repeats: int = REPEATS) -> tuple[bytes, float, object]:
     """(SVG bytes, median seconds over repeats, Report) of one writer call."""
     from converter.options import Report
-    from converter.writers import writer_for
+    from converter.outputs import writer_for
 
     write = writer_for(options)
     times, data, report = [], b"", None

@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
 import time
 from pathlib import Path
 
+from converter import formats
+from converter.convert import convert
 from converter.errors import FacesvgError
-from converter.userfiles import check_output
+from converter.options import ConversionOptions, OptionField, option_fields
+from converter.outputs import choices, output_kind
+from converter.userfiles import check_output, write_atomic
 
 
 class ProgressBar:
@@ -33,54 +38,39 @@ class ProgressBar:
         sys.stderr.flush()
 
 
+def _help(spec: OptionField) -> str:
+    """The flag's help: the option's help plus its default (or what unset means)."""
+    text = spec.meta.help
+    if spec.type is bool:
+        return f"turn off (on by default): {text}" if spec.default else text
+    if spec.default is not None:
+        return f"{text} (default {spec.default})"
+    return f"{text} (default: {spec.meta.unset})" if spec.meta.unset else text
+
+
 def add_conversion_options(p: argparse.ArgumentParser) -> None:
-    """The ConversionOptions flags shared by every command that converts."""
-    p.add_argument("--to", default="svg", help="output kind: svg (default) or fap2d")
-    p.add_argument("--shading", default="flat", help="flat (default), gouraud, gouraud-chapter")
-    p.add_argument("--frame", type=int, help="write a still of this frame instead of the animation")
-    p.add_argument("--fps", type=float, help="resample to this frame rate (default: the source's, else 30)")
-    p.add_argument("--size", type=int, default=512, help="output size in pixels (default 512)")
-    p.add_argument("--yaw", type=float, default=0.0, help="camera degrees around the vertical axis")
-    p.add_argument("--pitch", type=float, default=0.0, help="camera degrees up or down")
-    p.add_argument("--fov", type=float, default=30.0, help="vertical field of view in degrees")
-    p.add_argument("--ortho", action="store_true", help="orthographic projection")
-    p.add_argument("--neutral-frame", type=int, default=0, help="frame that serves as the neutral face")
-    p.add_argument("--start", type=int, default=0, help="first frame")
-    p.add_argument("--end", type=int, help="one past the last frame")
-    p.add_argument("--tolerance", type=float, default=0.25, help="max deviation in px the encoder may add")
-    p.add_argument("--raw", action="store_true", help="write every frame (no keyframe reduction)")
-    p.add_argument("--max-triangles", type=int, help="triangle budget")
-    p.add_argument("--no-occlusion", dest="occlusion", action="store_false", help="keep never-seen triangles")
-    p.add_argument("--svgz", action="store_true", help="gzip the SVG")
-    p.add_argument("--depth-layers", action="store_true",
-                   help="experimental: layer copies for triangles whose depth order flips")
-    p.add_argument("--no-rigid", dest="rigid", action="store_false",
-                   help="do not factor rigid 2D motion into animated group transforms")
-    p.add_argument("--smooth", type=float, help="temporal smoothing, Gaussian sigma in frames (default 0: off)")
-    p.add_argument("--fap", help="MPEG-4 FAP stream that drives the input face")
-    p.add_argument("--fdp", help="feature-point definition of the input face (JSON or Xface .fdp)")
-    p.add_argument("--clone-target", help="put the animation onto this face before converting")
-    p.add_argument("--clone-method", default="dense", help="example | frames | dense")
-    p.add_argument("--clone-keys", help="key-model pairs (zip) for --clone-method example")
-    p.add_argument("--correspondences", help="user correspondences for dense cloning")
+    """The ConversionOptions flags shared by every command that converts, from the options' metadata."""
+    for spec in option_fields():
+        if spec.type is bool:
+            action = "store_false" if spec.default else "store_true"
+            p.add_argument(spec.flag, dest=spec.name, action=action, help=_help(spec))
+            continue
+        kinds = choices(spec)
+        p.add_argument(spec.flag, dest=spec.name, type=spec.type, default=spec.default,
+                       choices=list(kinds) if kinds else None, help=_help(spec),
+                       metavar="FILE" if spec.meta.path else None)
 
 
-def options_from_args(args: argparse.Namespace):
+def options_from_args(args: argparse.Namespace) -> ConversionOptions:
     """ConversionOptions from parsed arguments (only the fields the parser has)."""
-    from dataclasses import fields
-
-    from converter.options import ConversionOptions
-
-    names = {f.name for f in fields(ConversionOptions)}
+    names = {spec.name for spec in option_fields()}
     return ConversionOptions(**{k: v for k, v in vars(args).items() if k in names and v is not None})
 
 
 def cmd_convert(args: argparse.Namespace) -> int:
     """facesvg convert INPUT -o OUT."""
-    from converter.convert import convert, write_atomic
-
     options = options_from_args(args)
-    suffix = ".zip" if options.to == "fap2d" else (".svgz" if options.svgz else ".svg")
+    suffix = output_kind(options.to).file_for(options).extension
     out = check_output(args.output if args.output else Path(args.input).with_suffix(suffix))
     result = convert(args.input, options, progress=ProgressBar(not args.quiet and sys.stderr.isatty() or args.progress),
                      cache=args.cache)
@@ -93,8 +83,6 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 def cmd_info(args: argparse.Namespace) -> int:
     """facesvg info INPUT."""
-    from converter import formats
-
     anim = formats.load(args.input, cache=args.cache)
     info = {
         "name": anim.name,
@@ -114,13 +102,6 @@ def cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
-def raise_input(message: str) -> None:
-    """Raise the InputError the CLI prints as one line."""
-    from converter.errors import InputError
-
-    raise InputError(message)
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand."""
     parser = argparse.ArgumentParser(prog="facesvg", description="Turn 3D facial animation into lightweight 2D.")
@@ -128,7 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("convert", help="convert an animation to SVG (or another 2D output)")
     p.add_argument("input", help="glTF/GLB, zip of OBJ frames, or OBJ with --cache")
-    p.add_argument("-o", "--output", help="output file (default: input name with .svg)")
+    p.add_argument("-o", "--output", help="output file (default: the input name with the output kind's extension)")
     p.add_argument("--cache", help="PC2 or MDD point cache for an OBJ input")
     p.add_argument("--report", help="also write the Report as JSON to this file")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
@@ -150,8 +131,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _extra_commands():
     """Subcommand registrars of optional modules, in a fixed order."""
-    import importlib
-
     out = []
     for mod, attr in (
         ("converter.verify", "register_cli"),

@@ -4,12 +4,20 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict, dataclass, field, fields
-from typing import Callable
+from typing import Any, Callable, Mapping
 
 from converter.errors import InputError
 
-OUTPUT_KINDS = ("svg", "fap2d")
-SHADINGS = ("flat", "gouraud", "gouraud-chapter")
+SHADINGS = {
+    "flat": "Flat (smallest)",
+    "gouraud": "Gouraud (smooth gradients)",
+    "gouraud-chapter": "Gouraud, chapter method (three gradients)",
+}
+CLONE_METHODS = {
+    "dense": "Dense (whole face)",
+    "example": "Example-based (key models)",
+    "frames": "Local frames",
+}
 
 Progress = Callable[[str, float], None]
 """Progress callback: (stage name, fraction of the whole job done, 0..1)."""
@@ -20,53 +28,114 @@ def no_progress(stage: str, fraction: float) -> None:
 
 
 @dataclass(frozen=True)
+class Option:
+    """What the CLI, the web form, the API and OpenAPI show and check for one ConversionOptions field."""
+
+    help: str
+    label: str = ""  # the web form's label
+    choices: Mapping[str, str] | None = None  # value -> label, in the order offered
+    output_kinds: bool = False  # the choices are the registered output kinds (converter.outputs)
+    minimum: float | None = None
+    maximum: float | None = None
+    exclusive_minimum: bool = False  # the minimum itself is refused
+    unit: str = ""
+    unset: str = ""  # what leaving it unset (None) means
+    path: bool = False  # a file the user names: a path on the command line, an upload on the web
+    accept: str = ""  # the web form's file types for a path
+    advanced: bool = False  # under "More options" in the web form
+    form: bool = True  # offered by the web form (svgz is not: the web stores both SVG and SVGZ)
+
+    def check(self, name: str, value) -> None:
+        """InputError when value is not one of the choices or outside the range."""
+        shown = name.replace("_", "-")
+        if self.choices is not None and value not in self.choices:
+            raise InputError(f"unknown {name.replace('_', ' ')} {value!r}; choose one of {', '.join(self.choices)}.")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            return
+        if value != value:
+            raise InputError(f"{shown} must be a number, got {value}.")
+        lo, hi = self.minimum, self.maximum
+        low = lo is not None and (value <= lo if self.exclusive_minimum else value < lo)
+        high = hi is not None and value > hi
+        if not (low or high):
+            return
+        unit = f" {self.unit}" if self.unit else ""
+        if lo is not None and hi is not None:
+            above = f"above {lo:g}" if self.exclusive_minimum else f"between {lo:g}"
+            joint = " and at most " if self.exclusive_minimum else " and "
+            raise InputError(f"{shown} must be {above}{joint}{hi:g}{unit}, got {value:g}.")
+        if lo is not None:
+            bound = f"above {lo:g}" if self.exclusive_minimum else f"at least {lo:g}"
+            raise InputError(f"{shown} must be {bound}{unit}, got {value:g}.")
+        raise InputError(f"{shown} must be at most {hi:g}{unit}, got {value:g}.")
+
+
+def option(default, help: str, **meta):
+    """A ConversionOptions field with its Option metadata."""
+    return field(default=default, metadata={"option": Option(help, **meta)})
+
+
+@dataclass(frozen=True)
 class ConversionOptions:
     """Every conversion knob, with defaults that give a good result."""
 
-    to: str = "svg"  # output kind: svg | fap2d
-    shading: str = "flat"  # flat | gouraud (exact gradients) | gouraud-chapter (three-gradient filters)
-    frame: int | None = None  # write a still of this frame instead of the animation
-    fps: float | None = None  # resample to this rate; None keeps the source's rate (else 30)
-    size: int = 512  # output viewport in pixels (square)
-    yaw: float = 0.0  # camera degrees around the vertical axis, 0 = front
-    pitch: float = 0.0  # camera degrees up/down
-    fov: float = 30.0  # vertical field of view in degrees (perspective)
-    ortho: bool = False  # orthographic projection
-    neutral_frame: int = 0  # the frame that serves as the neutral face
-    start: int = 0  # first frame to convert
-    end: int | None = None  # one past the last frame to convert
-    tolerance: float = 0.25  # max vertex deviation in output pixels the encoder may introduce
-    raw: bool = False  # every frame written, no keyframe reduction (the chapter's unoptimised encoding)
-    max_triangles: int | None = None  # triangle budget (simplify once, shared by every frame)
-    occlusion: bool = True  # drop triangles never seen in any frame (triangle-id render)
-    depth_layers: bool = False  # experimental: extra layer copies of triangles whose depth order flips
-    rigid: bool = True  # factor rigid 2D motion per part into animated group transforms
-    smooth: float = 0.0  # temporal smoothing strength (0 = off)
-    svgz: bool = False  # gzip the SVG
-    fap: str | None = None  # MPEG-4 FAP stream driving the input face
-    fdp: str | None = None  # feature-point definition (JSON or Xface .fdp) for the input face
-    clone_target: str | None = None  # put the animation onto this face before conversion
-    clone_method: str = "dense"  # example | frames | dense
-    clone_keys: str | None = None  # key-model pairs (zip) for example-based cloning
-    correspondences: str | None = None  # user correspondences for dense cloning
+    to: str = option("svg", "the kind of file to write", label="Output kind", output_kinds=True)
+    shading: str = option("flat", "how triangles are filled: flat colours, or exact (gouraud) or the chapter's "
+                          "three-gradient (gouraud-chapter) smooth shading", label="Shading", choices=SHADINGS)
+    frame: int | None = option(None, "write a still of this frame instead of the animation", label="Still of frame",
+                               minimum=0, unset="animate", advanced=True)
+    fps: float | None = option(None, "resample to this frame rate", label="Frames per second", minimum=0,
+                               exclusive_minimum=True, maximum=240, unset="the source's rate, else 30")
+    size: int = option(512, "output viewport in pixels (square)", label="Size (px)", minimum=16, maximum=8192,
+                       unit="px")
+    yaw: float = option(0.0, "camera degrees around the vertical axis, 0 = front", label="Camera yaw (°)",
+                        minimum=-180, maximum=180, unit="degrees")
+    pitch: float = option(0.0, "camera degrees up or down", label="Camera pitch (°)", minimum=-89, maximum=89,
+                          unit="degrees")
+    fov: float = option(30.0, "vertical field of view in degrees (perspective)", label="Field of view (°)",
+                        minimum=1, maximum=150, unit="degrees", advanced=True)
+    ortho: bool = option(False, "orthographic projection", label="Orthographic camera", advanced=True)
+    neutral_frame: int = option(0, "the frame that serves as the neutral face", label="Neutral frame", minimum=0,
+                                advanced=True)
+    start: int = option(0, "first frame to convert", label="First frame", minimum=0, advanced=True)
+    end: int | None = option(None, "one past the last frame to convert", label="End frame (exclusive)", minimum=1,
+                             unset="the last frame", advanced=True)
+    tolerance: float = option(0.25, "largest vertex deviation in output pixels the encoder may add",
+                              label="Tolerance (px)", minimum=0, exclusive_minimum=True, maximum=50, unit="px")
+    raw: bool = option(False, "write every frame, no keyframe reduction (the chapter's unoptimised encoding)",
+                       label="Every frame, no keyframe reduction", advanced=True)
+    max_triangles: int | None = option(None, "triangle budget (simplify once, shared by every frame)",
+                                       label="Triangle budget", minimum=4, unset="no limit")
+    occlusion: bool = option(True, "drop triangles never seen in any frame (triangle-id render)",
+                             label="Drop never-visible triangles", advanced=True)
+    depth_layers: bool = option(False, "experimental: extra layer copies of triangles whose depth order flips",
+                                label="Depth-order layer copies (experimental)", advanced=True)
+    rigid: bool = option(True, "factor rigid 2D motion per part into animated group transforms",
+                         label="Factor rigid head motion", advanced=True)
+    smooth: float = option(0.0, "temporal smoothing, Gaussian sigma in frames (0 = off)", label="Temporal smoothing",
+                           minimum=0, advanced=True)
+    svgz: bool = option(False, "gzip the SVG", label="Gzip the SVG", form=False)
+    fap: str | None = option(None, "MPEG-4 FAP stream that drives the face", label="FAP stream", path=True,
+                             advanced=True)
+    fdp: str | None = option(None, "feature points of the face (JSON or Xface .fdp)", label="FDP file", path=True,
+                             advanced=True)
+    clone_target: str | None = option(None, "a glTF/GLB/OBJ face to put the animation onto before converting",
+                                      label="Clone onto face", path=True, accept=".glb,.gltf,.obj,.zip",
+                                      advanced=True)
+    clone_method: str = option("dense", "how the animation is put onto the clone target", label="Cloning method",
+                               choices=CLONE_METHODS, advanced=True)
+    clone_keys: str | None = option(None, "zip of key-model pairs, for example-based cloning", label="Key models",
+                                    path=True, accept=".zip", advanced=True)
+    correspondences: str | None = option(None, "your own point correspondences, for dense cloning",
+                                         label="Correspondences", path=True, advanced=True)
 
     def __post_init__(self) -> None:
-        if self.to not in OUTPUT_KINDS:
-            raise InputError(f"unknown output kind {self.to!r}; choose one of {', '.join(OUTPUT_KINDS)}.")
-        if self.shading not in SHADINGS:
-            raise InputError(f"unknown shading {self.shading!r}; choose one of {', '.join(SHADINGS)}.")
-        if self.fps is not None and not (0 < self.fps <= 240):
-            raise InputError(f"fps must be between 0 and 240, got {self.fps}.")
-        if not (16 <= self.size <= 8192):
-            raise InputError(f"size must be between 16 and 8192 pixels, got {self.size}.")
-        if not (0 < self.tolerance <= 50):
-            raise InputError(f"tolerance must be between 0 and 50 px, got {self.tolerance}.")
-        if self.max_triangles is not None and self.max_triangles < 4:
-            raise InputError(f"max-triangles must be at least 4, got {self.max_triangles}.")
-        if self.start < 0 or (self.end is not None and self.end <= self.start):
+        for spec in option_fields():
+            value = getattr(self, spec.name)
+            if value is not None:
+                spec.meta.check(spec.name, value)
+        if self.end is not None and self.end <= self.start:
             raise InputError("the frame range is empty; --end must be greater than --start and --start >= 0.")
-        if self.smooth < 0:
-            raise InputError("smooth must be 0 (off) or positive.")
 
     def to_json(self) -> dict:
         """Plain dict of every option."""
@@ -101,6 +170,34 @@ def _coerce(name: str, type_name: str, value):
         return str(value)
     except (TypeError, ValueError):
         raise InputError(f"option {name} must be a {type_name.split()[0]}, got {value!r}.") from None
+
+
+@dataclass(frozen=True)
+class OptionField:
+    """One ConversionOptions field as the CLI, the web form and OpenAPI see it."""
+
+    name: str
+    type: type  # bool, int, float or str
+    default: Any  # None: unset unless given
+    meta: Option
+
+    @property
+    def flag(self) -> str:
+        """The command-line flag: --name, or --no-name for a switch that is on by default."""
+        dashed = self.name.replace("_", "-")
+        return f"--no-{dashed}" if self.type is bool and self.default else f"--{dashed}"
+
+
+def _value_type(type_name: str) -> type:
+    for t in (bool, int, float):
+        if t.__name__ in type_name:
+            return t
+    return str
+
+
+def option_fields() -> tuple[OptionField, ...]:
+    """Every ConversionOptions field with its type, default and Option metadata, in declaration order."""
+    return _OPTION_FIELDS
 
 
 @dataclass
@@ -139,3 +236,7 @@ class Report:
     def dumps(self) -> str:
         """JSON text."""
         return json.dumps(self.to_json(), sort_keys=True)
+
+
+_OPTION_FIELDS = tuple(OptionField(f.name, _value_type(str(f.type)), f.default, f.metadata["option"])
+                       for f in fields(ConversionOptions))

@@ -79,11 +79,6 @@ def create_app(config: dict | None = None) -> Flask:
     return app
 
 
-def get_queue(app: Flask):
-    """The app's job queue."""
-    return app.extensions["facesvg_queue"]
-
-
 def _close_quietly(queue) -> None:
     try:
         queue.close()

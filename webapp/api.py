@@ -5,13 +5,14 @@ from __future__ import annotations
 from flask import Blueprint, abort, current_app, jsonify, request, send_file, url_for
 
 from converter.errors import InputError
+from converter.outputs import OUTPUTS, output_files
 from webapp.jobstore import DONE, Job
 from webapp.openapi import openapi_document
-from webapp.storage import RESULT_FILES, is_job_id
+from webapp.storage import is_job_id, result_files
 from webapp.submit import create_job, download_stem
 
 api = Blueprint("api", __name__)
-ATTACHMENT_KINDS = ("svgz", "fap2d")  # never shown inline by a browser
+REPORT_SUFFIX = ".report.json"
 
 
 def queue():
@@ -122,18 +123,20 @@ def _finished_job(job_id: str) -> Job:
 
 @api.get("/jobs/<job_id>/result")
 def get_result(job_id: str):
-    """The main output: the SVG, or the fap2d package."""
+    """The main output: the first file of the job's output kind (the SVG, or the fap2d package)."""
     job = _finished_job(job_id)
-    kinds = queue().storage.available(job.id)
-    main = "fap2d" if "fap2d" in kinds else "svg"
-    return _send(job, main)
+    kind = OUTPUTS.get(job.options.get("to", "svg"))
+    if kind is None:
+        abort(404, description=f"this job's output kind {job.options.get('to')!r} is not offered any more.")
+    return _send(job, kind.files[0].key)
 
 
 @api.get("/jobs/<job_id>/result/<kind>")
 def get_result_kind(job_id: str, kind: str):
-    """One output by kind: svg, svgz, fap2d, report."""
-    if kind not in RESULT_FILES:
-        abort(404, description=f"unknown result kind {kind!r}; use one of {', '.join(RESULT_FILES)}.")
+    """One output by kind: a file of an output kind (svg, svgz, fap2d, ...) or the report."""
+    files = result_files()
+    if kind not in files:
+        abort(404, description=f"unknown result kind {kind!r}; use one of {', '.join(files)}.")
     return _send(_finished_job(job_id), kind)
 
 
@@ -151,9 +154,10 @@ def _send(job: Job, kind: str):
     path = queue().storage.result_path(job.id, kind)
     if path is None:
         abort(404, description=f"this job has no {kind} output.")
-    name, media = RESULT_FILES[kind]
-    suffix = {"svg": ".svg", "svgz": ".svgz", "fap2d": ".fap2d.zip", "report": ".report.json"}[kind]
-    download = kind in ATTACHMENT_KINDS or request.args.get("download") in ("1", "true")
+    media = result_files()[kind][1]
+    out = output_files().get(kind)
+    suffix = out.suffix if out else REPORT_SUFFIX
+    download = (out is not None and out.attachment) or request.args.get("download") in ("1", "true")
     response = send_file(path, mimetype=media, as_attachment=download,
                          download_name=download_stem(job) + suffix, max_age=0)
     if kind == "svg":  # generated SVG shown inline: no scripts, no external loads

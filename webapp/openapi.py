@@ -2,38 +2,40 @@
 
 from __future__ import annotations
 
-from dataclasses import MISSING, fields
+from converter.options import OptionField, option_fields
+from converter.outputs import OUTPUTS, choices, required_by
+from webapp.storage import result_files
 
-from converter.options import ConversionOptions
-from webapp.storage import RESULT_FILES
-
-FILE_FIELDS = {
+UPLOAD_FIELDS = {
     "file": "the animation: glTF/GLB, a zip of numbered OBJ frames, or an OBJ mesh (with 'cache')",
     "cache": "PC2 or MDD point cache for an OBJ mesh",
-    "fap": "MPEG-4 FAP stream (drives the face; required with to=fap2d)",
-    "fdp": "feature-point definition of the face (JSON or Xface .fdp; required with to=fap2d)",
-    "clone_target": "a face file to clone the animation onto",
-    "clone_keys": "zip of key-model pairs for clone_method=example",
-    "correspondences": "user correspondences for dense cloning",
 }
-SKIP = {"fap", "fdp", "clone_target", "clone_keys", "correspondences"}
+JSON_TYPES = {bool: "boolean", int: "integer", float: "number", str: "string"}
+
+
+def _file_description(spec: OptionField) -> str:
+    needed = required_by(spec.name)
+    return spec.meta.help + (f" (required with to={' or '.join(needed)})" if needed else "")
+
+
+def _option_property(spec: OptionField) -> dict:
+    """The JSON schema of one scalar option, from its metadata."""
+    prop = {"type": JSON_TYPES[spec.type], "description": spec.meta.help}
+    if spec.default is not None:
+        prop["default"] = spec.default
+    kinds = choices(spec)
+    if kinds:
+        prop["enum"] = list(kinds)
+    meta = spec.meta
+    if meta.minimum is not None:
+        prop["exclusiveMinimum" if meta.exclusive_minimum else "minimum"] = meta.minimum
+    if meta.maximum is not None:
+        prop["maximum"] = meta.maximum
+    return prop
 
 
 def _option_schema() -> dict:
-    props = {}
-    for f in fields(ConversionOptions):
-        if f.name in SKIP:
-            continue
-        t = str(f.type)
-        kind = "boolean" if "bool" in t else "integer" if "int" in t else "number" if "float" in t else "string"
-        prop = {"type": kind}
-        if f.default is not MISSING and f.default is not None:
-            prop["default"] = f.default
-        props[f.name] = prop
-    props["to"]["enum"] = ["svg", "fap2d"]
-    props["shading"]["enum"] = ["flat", "gouraud", "gouraud-chapter"]
-    props["clone_method"]["enum"] = ["example", "frames", "dense"]
-    return props
+    return {spec.name: _option_property(spec) for spec in option_fields() if not spec.meta.path}
 
 
 def _error(description: str) -> dict:
@@ -51,7 +53,8 @@ JOB_ID = {"name": "job_id", "in": "path", "required": True, "schema": {"type": "
 
 def openapi_document() -> dict:
     """The whole OpenAPI document."""
-    upload_props = {k: {"type": "string", "format": "binary", "description": v} for k, v in FILE_FIELDS.items()}
+    files = {**UPLOAD_FIELDS, **{spec.name: _file_description(spec) for spec in option_fields() if spec.meta.path}}
+    upload_props = {k: {"type": "string", "format": "binary", "description": v} for k, v in files.items()}
     upload_props["sample"] = {"type": "string", "enum": ["1"], "description": "convert the bundled sample instead"}
     upload_props.update(_option_schema())
     return {
@@ -97,12 +100,12 @@ def openapi_document() -> dict:
                 "get": {"summary": "The main output (SVG, or the fap2d package)", "operationId": "getResult",
                         "parameters": [{"name": "download", "in": "query", "schema": {"type": "string"}}],
                         "responses": {"200": {"description": "the file", "content": {
-                            "image/svg+xml": {}, "application/zip": {}}},
+                            media: {} for media in dict.fromkeys(k.files[0].media_type for k in OUTPUTS.values())}},
                             "404": _error("no such job"), "409": _error("the job is not done")}},
             },
             "/jobs/{job_id}/result/{kind}": {
                 "parameters": [JOB_ID, {"name": "kind", "in": "path", "required": True,
-                                        "schema": {"type": "string", "enum": list(RESULT_FILES)}}],
+                                        "schema": {"type": "string", "enum": list(result_files())}}],
                 "get": {"summary": "One output by kind", "operationId": "getResultKind",
                         "parameters": [{"name": "download", "in": "query", "schema": {"type": "string"}}],
                         "responses": {"200": {"description": "the file"},

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import fields
 from datetime import datetime, timezone
 
 from flask import Blueprint, abort, current_app, flash, redirect, render_template, request, url_for
 
 from converter.errors import InputError
-from converter.options import ConversionOptions
+from converter.options import option_fields
+from converter.outputs import choices, output_files
 from webapp.jobstore import DONE
 from webapp.storage import is_job_id
 from webapp.submit import create_job
@@ -47,14 +47,26 @@ def num(value) -> str:
     return str(value)
 
 
-def _defaults() -> dict:
-    return {f.name: getattr(ConversionOptions(), f.name) for f in fields(ConversionOptions)}
+def form_fields() -> list[dict]:
+    """The upload form's option controls, from the ConversionOptions metadata and the output registry."""
+    out = []
+    for spec in option_fields():
+        meta = spec.meta
+        if not meta.form:
+            continue
+        offered = choices(spec)
+        widget = "file" if meta.path else "select" if offered else "check" if spec.type is bool else "number"
+        out.append({"name": spec.name, "label": meta.label or spec.name, "widget": widget, "value": spec.default,
+                    "choices": dict(offered or {}), "min": meta.minimum, "max": meta.maximum,
+                    "step": 1 if spec.type is int else "any", "placeholder": meta.unset, "hint": meta.help,
+                    "accept": meta.accept, "advanced": meta.advanced})
+    return out
 
 
 @pages.get("/")
 def index():
     """The upload page."""
-    return render_template("upload.html", defaults=_defaults(), accept=ACCEPT,
+    return render_template("upload.html", fields=form_fields(), accept=ACCEPT,
                            recent=queue().recent(8),
                            max_mb=current_app.config["MAX_CONTENT_LENGTH"] // (1 << 20))
 
@@ -66,7 +78,7 @@ def submit():
     try:
         job = create_job(queue(), current_app.config, request.form, request.files)
     except InputError as exc:
-        return render_template("upload.html", defaults=_defaults(), accept=ACCEPT, error=str(exc),
+        return render_template("upload.html", fields=form_fields(), accept=ACCEPT, error=str(exc),
                                recent=queue().recent(8),
                                max_mb=current_app.config["MAX_CONTENT_LENGTH"] // (1 << 20)), 400
     return redirect(url_for("pages.job_page", job_id=job.id), code=303)
@@ -85,7 +97,8 @@ def job_page(job_id: str):
     if job is None:
         abort(404, description="There is no such job; it may have been deleted or cleaned up.")
     kinds = queue().storage.available(job.id) if job.state == DONE else []
-    return render_template("job.html", job=job, kinds=kinds)
+    labels = {**{key: f.label for key, f in output_files().items()}, "report": "Report (JSON)"}
+    return render_template("job.html", job=job, kinds=kinds, labels=labels)
 
 
 @pages.post("/jobs/<job_id>/delete")

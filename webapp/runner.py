@@ -13,10 +13,18 @@ import traceback
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 import numpy as np
+from PIL import Image
 
+from converter import mpeg4
+from converter.convert import convert
 from converter.errors import FacesvgError
+from converter.extract import extract, fit_camera
+from converter.options import ConversionOptions
+from converter.outputs import output_kind
+from converter.userfiles import write_atomic
+from converter.verify import verify_animation
 from webapp.jobstore import CANCELLING, DONE, FAILED, RUNNING, Job, JobStore, open_store
-from webapp.storage import RESULT_FILES, Storage
+from webapp.storage import Storage, result_files
 
 log = logging.getLogger("facesvg.webapp")
 PREVIEW_MAX_SIZE = 512  # the 3D prerender is drawn at most this wide (same camera framing, smaller viewport)
@@ -90,8 +98,6 @@ class ProgressRecorder:
 
 def job_options(job: Job, storage: Storage):
     """ConversionOptions of a job: its scalar options plus the stored extra files as paths."""
-    from converter.options import ConversionOptions
-
     data = dict(job.options)
     inputs = storage.inputs(job.id)
     for role, name in job.files.items():
@@ -102,35 +108,29 @@ def job_options(job: Job, storage: Storage):
 
 def perform(job: Job, storage: Storage, progress, preview_frames: int = 48) -> dict:
     """Convert the job's input, write every output and the 3D prerenders; returns the result summary."""
-    from converter.convert import convert, write_atomic
-
     options = job_options(job, storage)
+    kind = output_kind(options.to)
     inputs, out = storage.inputs(job.id), storage.out(job.id)
     cache = inputs / job.files["cache"] if "cache" in job.files else None
     prepared = []
     result = convert(inputs / job.files["input"], options, progress=lambda s, f: progress(s, CONVERT_SHARE * f),
                      cache=cache, on_prepared=prepared.append)
     anim = prepared[0]
-    if options.to == "fap2d":  # the package plays the FAP stream: prerender the 3D face that stream drives
-        from converter import mpeg4
-
+    if kind.takes_fap_stream:  # e.g. the fap2d package plays the stream: prerender the 3D face it drives
         anim = mpeg4.drive(anim, options.fap, options.fdp, fps=options.fps)
-    outputs: dict[str, bytes] = {}
-    if options.to == "fap2d":
-        outputs["fap2d"] = result.data
-    else:
-        svg = gzip.decompress(result.data) if options.svgz else result.data
-        outputs["svg"] = svg
-        outputs["svgz"] = result.data if options.svgz else gzip.compress(svg, mtime=0)
+    # Every file of the kind: the main one and its variants (the SVG and its gzip).
+    main = gzip.decompress(result.data) if kind.file_for(options).gzip else result.data
+    outputs: dict[str, bytes] = {f.key: gzip.compress(main, mtime=0) if f.gzip else main for f in kind.files}
     report = result.report.to_json()
-    if "svg" in outputs:
+    if kind.verify:
         progress("verify", CONVERT_SHARE)
-        report["figures"].update(fidelity(outputs["svg"], anim))
+        report["figures"].update(fidelity(main, anim))
     outputs["report"] = json.dumps(report, indent=1, sort_keys=True).encode()
-    for kind, data in outputs.items():
-        write_atomic(out / RESULT_FILES[kind][0], data)
+    files = result_files()
+    for key, data in outputs.items():
+        write_atomic(out / files[key][0], data)
     progress("prerender", CONVERT_SHARE + VERIFY_SHARE)
-    still = options.frame is not None and options.to == "svg"
+    still = options.frame is not None and kind.stills
     frames = write_previews(anim, options, out, preview_frames, progress, only=options.frame if still else None)
     progress("done", 1.0)
     return {
@@ -149,8 +149,6 @@ def perform(job: Job, storage: Storage, progress, preview_frames: int = 48) -> d
 def fidelity(svg: bytes, anim) -> dict:
     """The verifier's figures for the SVG against the exact projection (empty if it cannot measure this SVG)."""
     try:
-        from converter.verify import verify_animation
-
         v = verify_animation(svg, anim)
     except Exception as exc:  # an optional measurement: a verifier limit must not fail the user's job
         log.warning("verification skipped: %s: %s", type(exc).__name__, exc)
@@ -169,18 +167,12 @@ def preview_indices(n_frames: int, limit: int) -> list[int]:
 
 def write_previews(anim, options, out, limit: int, progress, only: int | None = None) -> list[int]:
     """The 3D prerender (pyrender, same camera framing as the 2D output) of chosen frames (or one) as PNGs."""
-    from PIL import Image
-
-    from converter.extract import extract, fit_camera
-
     frames = preview_indices(anim.n_frames, limit) if only is None else [only]
     if not frames:
         return []
     camera = fit_camera(anim, min(options.size, PREVIEW_MAX_SIZE), options.yaw, options.pitch, options.fov,
                         options.ortho)
     sheet = extract(anim, camera, neutral=0, occlusion=False, reference_frames=tuple(frames))
-    from converter.convert import write_atomic
-
     for i, k in enumerate(frames):
         buf = io.BytesIO()
         Image.fromarray(sheet.references[k]).save(buf, format="PNG", optimize=False)

@@ -7,15 +7,16 @@ import shutil
 import uuid
 from pathlib import Path
 
-JOB_ID = re.compile(r"^[0-9a-f]{32}$")
+from converter.outputs import output_files
 
-# Output files a finished job may hold, by the kind name the API uses.
-RESULT_FILES = {
-    "svg": ("result.svg", "image/svg+xml"),
-    "svgz": ("result.svgz", "image/svg+xml"),
-    "fap2d": ("result.fap2d.zip", "application/zip"),
-    "report": ("report.json", "application/json"),
-}
+JOB_ID = re.compile(r"^[0-9a-f]{32}$")
+REPORT = ("report.json", "application/json")  # every finished job's report, beside its output files
+
+
+def result_files() -> dict[str, tuple[str, str]]:
+    """Files a finished job may hold, by the kind name the API uses: (stored file name, media type)."""
+    files = {key: (f"result{f.suffix}", f.media_type) for key, f in output_files().items()}
+    return {**files, "report": REPORT}
 
 
 def new_job_id() -> str:
@@ -55,9 +56,10 @@ class Storage:
 
     def result_path(self, job_id: str, kind: str) -> Path | None:
         """The file of a result kind if it exists, else None."""
-        if kind not in RESULT_FILES:
+        files = result_files()
+        if kind not in files:
             return None
-        path = self.job_dir(job_id) / "out" / RESULT_FILES[kind][0]
+        path = self.job_dir(job_id) / "out" / files[kind][0]
         return path if path.is_file() else None
 
     def preview_path(self, job_id: str, frame: int) -> Path | None:
@@ -67,7 +69,7 @@ class Storage:
 
     def available(self, job_id: str) -> list[str]:
         """The result kinds present on disk, in a fixed order."""
-        return [k for k in RESULT_FILES if self.result_path(job_id, k)]
+        return [k for k in result_files() if self.result_path(job_id, k)]
 
     def delete(self, job_id: str) -> None:
         """Remove a job's folder and everything in it (missing is fine)."""

@@ -3,20 +3,19 @@
 from __future__ import annotations
 
 import shutil
-from dataclasses import fields
 from pathlib import Path
 
 from werkzeug.datastructures import FileStorage, ImmutableMultiDict
 from werkzeug.utils import secure_filename
 
 from converter.errors import InputError
-from converter.options import ConversionOptions
+from converter.options import ConversionOptions, option_fields
+from converter.outputs import output_kind
 from webapp.jobstore import Job
 from webapp.storage import new_job_id
 from webapp.uploads import EXTRA_FIELDS, check_extra, check_main_input, stored_name
 
-FILE_OPTIONS = ("fap", "fdp", "clone_target", "clone_keys", "correspondences")
-OPTION_FIELDS = tuple(f.name for f in fields(ConversionOptions) if f.name not in FILE_OPTIONS)
+OPTION_FIELDS = tuple(spec.name for spec in option_fields() if not spec.meta.path)  # path options come as uploads
 CONTROL_FIELDS = ("csrf_token", "sample", "file", *EXTRA_FIELDS)
 
 
@@ -30,6 +29,7 @@ def parse_options(form: ImmutableMultiDict, strict: bool) -> dict:
         elif strict and name not in CONTROL_FIELDS:
             raise InputError(f"unknown field {key!r}; see /api/v1/openapi.json for the accepted fields.")
     options = ConversionOptions.from_mapping(data)
+    output_kind(options.to)  # an unknown kind is refused here, before anything is stored
     return {k: v for k, v in options.to_json().items() if k in OPTION_FIELDS}
 
 
@@ -45,8 +45,9 @@ def create_job(queue, config, form: ImmutableMultiDict, files: ImmutableMultiDic
     if not use_sample and not _present(upload):
         raise InputError("choose an animation file to upload (glTF/GLB, a zip of OBJ frames, or OBJ + point "
                          "cache), or try the bundled sample.")
-    if options.get("to") == "fap2d" and not (_present(files.get("fap")) and _present(files.get("fdp"))):
-        raise InputError("the MPEG-4 2D package needs a FAP stream and an FDP file; add both or choose SVG.")
+    kind = output_kind(options["to"])
+    if not all(_present(files.get(name)) for name in kind.requires):
+        raise InputError(f"the {kind.label} needs {kind.requires_text}; add them or choose another output.")
     storage = queue.storage
     job_id = new_job_id()
     inputs = storage.inputs(job_id)

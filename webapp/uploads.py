@@ -10,9 +10,10 @@ from pathlib import Path, PurePosixPath
 
 from converter import formats
 from converter.errors import InputError
+from converter.options import option_fields
 
-# Extra files a job may carry besides the main input; each maps to the ConversionOptions field it fills.
-EXTRA_FIELDS = ("cache", "fap", "fdp", "clone_target", "clone_keys", "correspondences")
+# Extra files a job may carry besides the main input: the point cache, and one per ConversionOptions path field.
+EXTRA_FIELDS = ("cache", *(spec.name for spec in option_fields() if spec.meta.path))
 SUFFIX = re.compile(r"^\.[a-z0-9]{1,8}$")
 MAX_ZIP_ENTRIES = 20000
 MAX_ZIP_RATIO = 200  # uncompressed / compressed per entry; beyond this a zip is treated as a bomb

@@ -6,20 +6,18 @@ import argparse
 import time
 from pathlib import Path
 
-from converter.userfiles import check_output
+from converter import formats
+from converter.cloning import clone
+from converter.errors import InputError
+from converter.formats.gltf_write import write_glb
+from converter.userfiles import check_output, write_atomic
 
 
 def cmd_clone(args: argparse.Namespace) -> int:
     """Clone the source animation onto the target face and write a GLB."""
-    from converter import formats
-    from converter.cli import raise_input
-    from converter.cloning import clone
-    from converter.convert import write_atomic
-    from converter.formats.gltf_write import write_glb
-
     out = Path(args.output)
     if out.suffix.lower() != ".glb":
-        raise_input(f"the output must be a .glb file, got {out.name}.")
+        raise InputError(f"the output must be a .glb file, got {out.name}.")
     check_output(out)
     t = time.perf_counter()
     source = formats.load(args.source, cache=args.cache)

@@ -5,20 +5,19 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from converter import formats
 from converter.errors import InputError
-from converter.userfiles import check_output
+from converter.mpeg4 import loa
+from converter.mpeg4.auto import auto_fdp
+from converter.mpeg4.fap import read_fap, write_fap
+from converter.mpeg4.fdp import fdp_to_json
+from converter.userfiles import check_output, write_atomic
 
 
 def cmd_fdp(args: argparse.Namespace) -> int:
     """Propose an FDP for a face and write it as JSON."""
-    from converter.convert import write_atomic
-    from converter.mpeg4.auto import auto_fdp
-    from converter.mpeg4.fdp import fdp_to_json
-
     if not args.auto:
         raise InputError("only automatic proposals are supported; add --auto (then check and edit the JSON).")
-    from converter import formats
-
     face = formats.load(args.input)  # a single OBJ is a one-frame face
     fdp, report = auto_fdp(face)
     stem = Path(args.input).name.split(".")[0]
@@ -34,10 +33,6 @@ def cmd_fdp(args: argparse.Namespace) -> int:
 
 def cmd_fap_loa(args: argparse.Namespace) -> int:
     """Reduce a FAP stream to a level of articulation."""
-    from converter.convert import write_atomic
-    from converter.mpeg4 import loa
-    from converter.mpeg4.fap import read_fap, write_fap
-
     stream = read_fap(Path(args.input))
     original = len(write_fap(stream))
     reduced = loa.reduce(stream, args.level)
@@ -52,8 +47,6 @@ def cmd_fap_loa(args: argparse.Namespace) -> int:
 
 def register_cli(sub: argparse._SubParsersAction) -> None:
     """Add the fdp and fap-loa subcommands."""
-    from converter.mpeg4.loa import LEVELS
-
     p = sub.add_parser("fdp", help="propose MPEG-4 feature points (FDP) for a face mesh")
     p.add_argument("input", help="glTF/GLB, zip of OBJ frames, or a single OBJ mesh (frame 0 is the neutral face)")
     p.add_argument("--auto", action="store_true", help="find the feature points by geometric heuristics")
@@ -62,7 +55,7 @@ def register_cli(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("fap-loa", help="reduce a FAP stream to a level of articulation (Table 12.1)")
     p.add_argument("input", help="MPEG-4 .fap stream")
-    p.add_argument("--level", required=True, choices=LEVELS, help="high, medium, low or very-low")
+    p.add_argument("--level", required=True, choices=loa.LEVELS, help="high, medium, low or very-low")
     p.add_argument("-o", "--output", required=True, help="output .fap")
     p.set_defaults(func=cmd_fap_loa)
 

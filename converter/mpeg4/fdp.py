@@ -19,7 +19,7 @@ import numpy as np
 
 from converter.errors import InputError
 from converter.mpeg4.standard import FAPU_NAMES, FEATURE_POINTS
-from converter.userfiles import read_bytes
+from converter.userfiles import read_bytes, write_atomic
 
 FORMAT = "facesvg-fdp"
 PART_NAMES = ("left_eye", "right_eye", "upper_teeth", "lower_teeth", "tongue")
@@ -142,8 +142,6 @@ def fdp_to_json(fdp: Fdp) -> str:
 
 def save_fdp(fdp: Fdp, path: str | Path) -> None:
     """Write the FDP as JSON (atomically)."""
-    from converter.convert import write_atomic
-
     write_atomic(Path(path), fdp_to_json(fdp).encode())
 
 

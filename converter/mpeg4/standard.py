@@ -66,14 +66,6 @@ def fap_table() -> tuple[FapDef, ...]:
     return table
 
 
-def fap_by_name(name: str) -> FapDef:
-    """The FAP with this name (e.g. 'open_jaw')."""
-    for f in fap_table():
-        if f.name == name:
-            return f
-    raise KeyError(name)
-
-
 def fapu_scale(fapu: dict[str, float]) -> np.ndarray:
     """Per-FAP multiplier (68,) from FAPU units to model units (lengths) or radians (AU); 0 for FAP 1-2."""
     out = np.zeros(N_FAPS)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from converter.errors import InputError
-from converter.userfiles import read_bytes
+from converter.userfiles import read_bytes, write_atomic
 from converter.mpeg4 import influence
 from converter.mpeg4.fdp import Fdp, fapu_from_points
 from converter.mpeg4.standard import FAPU_NAMES, fap_table
@@ -77,8 +77,6 @@ class FaceDefTables:
 
     def save(self, path: str | Path) -> None:
         """Write as JSON (atomically)."""
-        from converter.convert import write_atomic
-
         write_atomic(Path(path), json.dumps(self.to_json(), separators=(",", ":")).encode())
 
     @classmethod

@@ -7,7 +7,16 @@ from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+from converter import formats
+from converter.convert import convert_animation
+from converter.mpeg4 import fat2d
+from converter.mpeg4.fap import read_fap
+from converter.options import ConversionOptions
+from converter.writers import fap2d
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # player.py, standin.py, reference_render.py
+
+from standin import standin_deform, synthetic_face  # noqa: E402  (found through the line above)
 
 XFACE = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "mpeg4" / "xface"
 
@@ -20,8 +29,6 @@ def xface(shared_data) -> Path:
 @pytest.fixture(scope="session")
 def synthetic():
     """(anim, fdp, deform) of the synthetic face."""
-    from standin import standin_deform, synthetic_face
-
     anim, fdp = synthetic_face()
     return anim, fdp, standin_deform(anim, fdp)
 
@@ -29,30 +36,21 @@ def synthetic():
 @pytest.fixture(scope="session")
 def synthetic_package(synthetic, shared_data):
     """(Package, zip bytes) of the synthetic face driven by Xface's joy.fap, 256 px."""
-    from converter.mpeg4.fap import read_fap, write_fap
-    from converter.options import ConversionOptions
-    from converter.writers import fap2d
-
     anim, fdp, deform = synthetic
     stream = read_fap(shared_data / "mpeg4" / "xface" / "joy.fap")
-    pkg = fap2d.build_package(anim, fdp, stream, write_fap(stream), deform, ConversionOptions(to="fap2d", size=256))
+    pkg = fap2d.package(fat2d.build(anim, fdp, stream, deform, ConversionOptions(to="fap2d", size=256)))
     return pkg, fap2d.package_zip(pkg)
 
 
 @pytest.fixture(scope="session")
 def sample_face(sample_path):
     """The bundled sample face (undriven)."""
-    from converter import formats
-
     return formats.load(sample_path)
 
 
 @pytest.fixture(scope="session")
 def joy_package(sample_face, shared_data) -> bytes:
-    """Zip of the sample face with Xface's joy.fap through fap2d.convert and the real MPEG-4 engine, 256 px."""
-    from converter.options import ConversionOptions, Report
-    from converter.writers import fap2d
-
+    """Zip of the sample face with Xface's joy.fap through convert_animation and the real MPEG-4 engine, 256 px."""
     fdp = Path(__file__).resolve().parents[2] / "samples" / "face.fdp.json"
     options = ConversionOptions(to="fap2d", size=256, fap=str(shared_data / "mpeg4/xface/joy.fap"), fdp=str(fdp))
-    return fap2d.convert(sample_face, options, Report()).data
+    return convert_animation(sample_face, options).data

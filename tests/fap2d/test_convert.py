@@ -11,12 +11,14 @@ from pathlib import Path
 import jsonschema
 import numpy as np
 import pytest
+import reference_render
 
-from converter import fap2d_render
 from converter.camera import Camera
 from converter.cli import main
+from converter.convert import convert_animation
 from converter.errors import InputError
-from converter.options import ConversionOptions, Report
+from converter.mpeg4 import deform, load_fdp, read_fap, tables_for
+from converter.options import ConversionOptions
 from converter.writers import fap2d
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -44,8 +46,8 @@ def test_cli_writes_a_zip_next_to_the_input(sample_path, shared_data, tmp_path, 
 @pytest.mark.parametrize("name", STREAMS)
 def test_every_xface_stream_makes_a_valid_package(name, sample_face, shared_data):
     options = ConversionOptions(to="fap2d", size=128, fap=str(shared_data / f"mpeg4/xface/{name}.fap"), fdp=str(FDP))
-    report = Report()
-    result = fap2d.convert(sample_face, options, report)
+    result = convert_animation(sample_face, options)
+    report = result.report
     assert result.extension == ".zip" and result.media_type == "application/zip"
     manifest = json.loads(zipfile.ZipFile(io.BytesIO(result.data)).read("manifest.json"))
     jsonschema.validate(manifest, json.loads(fap2d.SCHEMA_PATH.read_text()))
@@ -56,8 +58,8 @@ def test_every_xface_stream_makes_a_valid_package(name, sample_face, shared_data
 
 
 def test_neutral_frame_equals_portrait(joy_package):
-    pkg = fap2d_render.load_package(joy_package)
-    frame = fap2d_render.render_frame(pkg, np.zeros(68))
+    pkg = reference_render.load_package(joy_package)
+    frame = reference_render.render_frame(pkg, np.zeros(68))
     inside = pkg.portrait[..., 3] == 255
     assert inside.mean() > 0.2
     # Exact, the lips' slit included: there the mouth layer (teeth and gums rendered alone) shows through at rest.
@@ -67,14 +69,12 @@ def test_neutral_frame_equals_portrait(joy_package):
 
 
 def test_jaw_open_moves_the_chin_down_like_the_3d_engine(joy_package, sample_face):
-    from converter.mpeg4 import deform, load_fdp, tables_for
-
-    pkg = fap2d_render.load_package(joy_package)
+    pkg = reference_render.load_package(joy_package)
     chin = np.array(pkg.manifest["feature_points"]["2.1"])
     k = int(np.linalg.norm(pkg.xy0 - chin, axis=1).argmin())
     v = np.zeros(68)
     v[2] = 400  # open_jaw, MNS units
-    xy = fap2d_render.positions(pkg, v)
+    xy = reference_render.positions(pkg, v)
     assert xy[k, 1] - chin[1] > 4.0
     # The 3D engine, projected with the package's camera, puts the chin at the same place.
     neutral = sample_face.frames[0]
@@ -84,7 +84,7 @@ def test_jaw_open_moves_the_chin_down_like_the_3d_engine(joy_package, sample_fac
     want = Camera.from_json(pkg.manifest["camera"]).project(moved.astype(np.float64))[0]
     assert np.abs(xy[k] - want).max() < 0.3
     # And the drawn chin goes lower: the texture around the chin point is now found where the table put it.
-    frame = fap2d_render.render_frame(pkg, v)
+    frame = reference_render.render_frame(pkg, v)
     patch = lambda img, p: img[int(p[1]) - 3:int(p[1]) + 4, int(p[0]) - 3:int(p[0]) + 4].astype(float)  # noqa: E731
     moved_diff = np.abs(patch(frame, xy[k]) - patch(pkg.portrait, chin)).mean()
     static_diff = np.abs(patch(pkg.portrait, xy[k]) - patch(pkg.portrait, chin)).mean()
@@ -92,7 +92,7 @@ def test_jaw_open_moves_the_chin_down_like_the_3d_engine(joy_package, sample_fac
 
 
 def test_sample_mouth_layer_comes_from_its_teeth(joy_package):
-    pkg = fap2d_render.load_package(joy_package)
+    pkg = reference_render.load_package(joy_package)
     assert pkg.manifest["layers"][1]["source"] == "render"
     ys, xs = np.nonzero(pkg.mouth[..., 3])
     fp = pkg.manifest["feature_points"]
@@ -130,15 +130,13 @@ def test_bad_input_is_one_clear_error_and_nothing_written(case, sample_path, sha
 
 def test_library_raises_input_error_without_stream(sample_face):
     with pytest.raises(InputError, match="FAP stream"):
-        fap2d.convert(sample_face, ConversionOptions(to="fap2d", fdp=str(FDP)), Report())
+        convert_animation(sample_face, ConversionOptions(to="fap2d", fdp=str(FDP)))
 
 
 def test_fps_option_resamples_the_stream(sample_face, shared_data):
     fap = shared_data / "mpeg4/xface/joy.fap"
     options = ConversionOptions(to="fap2d", size=64, fps=50, fap=str(fap), fdp=str(FDP))
-    pkg = fap2d_render.load_package(fap2d.convert(sample_face, options, Report()).data)
+    pkg = reference_render.load_package(convert_animation(sample_face, options).data)
     assert pkg.manifest["stream"]["fps"] == 50 and pkg.n_frames == 216
-    from converter.mpeg4 import read_fap
-
     src = read_fap(fap).low_level()
     assert np.allclose(pkg.values[::2], src, atol=1e-6)  # every other frame is an original one

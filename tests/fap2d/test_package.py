@@ -4,15 +4,21 @@ from __future__ import annotations
 
 import io
 import json
+import types
 import zipfile
 
 import jsonschema
 import numpy as np
 import pytest
+import reference_render
+from player import flatten
+from scipy.ndimage import binary_dilation
 
-from converter import fap2d_render
+from converter.animation import FaceAnimation
 from converter.camera import Camera
-from converter.mpeg4.fap import read_fap, write_fap
+from converter.errors import InputError
+from converter.mpeg4 import fat2d
+from converter.mpeg4.fap import read_fap
 from converter.options import ConversionOptions
 from converter.writers import fap2d
 
@@ -32,7 +38,7 @@ def test_manifest_validates_and_arrays_fit(synthetic_package):
         size = np.dtype("<" + r["dtype"]).itemsize * int(np.prod(r["shape"]))
         assert r["offset"] + size <= len(blob)
     n = manifest["mesh"]["vertices"]["shape"][0]
-    tri = fap2d_render.load_package(data).triangles
+    tri = reference_render.load_package(data).triangles
     assert tri.min() >= 0 and tri.max() < n
     # A manifest that breaks the schema is caught by it.
     broken = dict(manifest, version="2.0")
@@ -43,7 +49,7 @@ def test_manifest_validates_and_arrays_fit(synthetic_package):
 def test_package_is_deterministic(synthetic, synthetic_package, xface):
     anim, fdp, deform = synthetic
     stream = read_fap(xface / "joy.fap")
-    again = fap2d.build_package(anim, fdp, stream, write_fap(stream), deform, ConversionOptions(to="fap2d", size=256))
+    again = fap2d.package(fat2d.build(anim, fdp, stream, deform, ConversionOptions(to="fap2d", size=256)))
     assert fap2d.package_zip(again) == synthetic_package[1]
 
 
@@ -66,19 +72,19 @@ def test_dropped_and_converted_faps(synthetic_package):
 def test_table_follows_projected_3d_displacement(synthetic, synthetic_package):
     """At and between the amplitudes, the 2D table lands where the 3D engine's projection does."""
     anim, fdp, deform = synthetic
-    pkg = fap2d_render.load_package(synthetic_package[1])
+    pkg = reference_render.load_package(synthetic_package[1])
     cam = Camera.from_json(pkg.manifest["camera"])
     neutral = anim.frames[0].astype(np.float64)
     # The package's vertices are a subset of the face's: match them by neutral projection.
     xy_all = cam.project(neutral)[0]
     d = np.linalg.norm(xy_all[None, :, :] - pkg.xy0[:, None, :], axis=-1)
     ids = d.argmin(axis=1)
-    assert d.min(axis=1).max() <= fap2d.XY_STEP
+    assert d.min(axis=1).max() <= fat2d.XY_STEP
     for fap, value in ((3, 157.5), (3, 500.0), (31, -300.0), (19, 700.0)):
         v = np.zeros(68)
         v[fap - 1] = value
         want = cam.project(deform(v[None])[0][ids].astype(np.float64))[0]
-        got = fap2d_render.positions(pkg, v)
+        got = reference_render.positions(pkg, v)
         err = np.abs(got - want).max()
         moved = np.abs(want - pkg.xy0).max()
         assert moved > 1.0, f"FAP {fap} should move the face"
@@ -86,46 +92,42 @@ def test_table_follows_projected_3d_displacement(synthetic, synthetic_package):
 
 
 def test_eyeball_rotation_is_a_2d_translation(synthetic_package):
-    pkg = fap2d_render.load_package(synthetic_package[1])
+    pkg = reference_render.load_package(synthetic_package[1])
     v = np.zeros(68)
     v[22] = 20000  # yaw_l_eyeball, 0.2 rad
-    delta = fap2d_render.positions(pkg, v) - pkg.xy0
+    delta = reference_render.positions(pkg, v) - pkg.xy0
     moved = np.abs(delta).max(axis=1) > 0
     assert 3 < moved.sum() < len(delta) // 4
     assert np.allclose(delta[moved], delta[moved][0]) and abs(delta[moved][0, 0]) > 1.0
 
 
 def test_neutral_frame_equals_portrait(synthetic_package):
-    pkg = fap2d_render.load_package(synthetic_package[1])
-    frame = fap2d_render.render_frame(pkg, np.zeros(68))
+    pkg = reference_render.load_package(synthetic_package[1])
+    frame = reference_render.render_frame(pkg, np.zeros(68))
     inside = pkg.portrait[..., 3] == 255
     assert inside.mean() > 0.3
     assert np.array_equal(frame[inside], pkg.portrait[inside])
     # On the anti-aliased silhouette the mesh layer adds to the portrait's coverage, never changes colour much.
-    from player import flatten
-
-    from scipy.ndimage import binary_dilation
-
     diff = np.abs(flatten(frame) - flatten(pkg.portrait)).max(axis=-1)
     edge = binary_dilation((pkg.portrait[..., 3] > 0) & (pkg.portrait[..., 3] < 255))
     assert diff.mean() < 0.5 and not (diff[~edge] > 2).any()
 
 
 def test_jaw_open_moves_chin_down(synthetic_package):
-    pkg = fap2d_render.load_package(synthetic_package[1])
+    pkg = reference_render.load_package(synthetic_package[1])
     chin = np.array(pkg.manifest["feature_points"]["2.1"])
     k = int(np.linalg.norm(pkg.xy0 - chin, axis=1).argmin())
     v = np.zeros(68)
     v[2] = 600  # open_jaw
-    xy = fap2d_render.positions(pkg, v)
+    xy = reference_render.positions(pkg, v)
     assert xy[k, 1] - chin[1] > 5.0 and abs(xy[k, 0] - chin[0]) < 0.5
     # The drawn chin goes lower: the silhouette's bottom under the mouth moves down.
     col = int(round(chin[0]))
     bottom = lambda img: np.flatnonzero(img[:, col, 3] > 128).max()  # noqa: E731
-    assert bottom(fap2d_render.render_frame(pkg, v)) - bottom(pkg.portrait) > 5
+    assert bottom(reference_render.render_frame(pkg, v)) - bottom(pkg.portrait) > 5
     # Opening the jaw shows the mouth layer between the lips.
     mouth = np.array(pkg.manifest["feature_points"]["2.3"])
-    frame = fap2d_render.render_frame(pkg, v)
+    frame = reference_render.render_frame(pkg, v)
     assert pkg.mouth[..., 3].any()
     x, y = int(mouth[0]), int(mouth[1])
     assert not np.array_equal(frame[y - 2:y + 12, x - 3:x + 3], pkg.portrait[y - 2:y + 12, x - 3:x + 3])
@@ -146,17 +148,13 @@ def test_default_mouth_layer_without_teeth(synthetic, xface):
     """A face with no teeth or tongue gets a default mouth pattern placed at its lip feature points."""
     anim, fdp, deform = synthetic
     keep = anim.part_ids != 2
-    from converter.animation import FaceAnimation
-
     bare = FaceAnimation(anim.frames, anim.faces[keep], anim.part_ids[keep], anim.parts, anim.fps, "bare")
-    import types
-
     fdp2 = types.SimpleNamespace(points=fdp.points, parts={k: v for k, v in fdp.parts.items() if "teeth" not in k},
                                  fapu=fdp.fapu)
     stream = read_fap(xface / "anger.fap")
-    pkg = fap2d.build_package(bare, fdp2, stream, write_fap(stream), deform, ConversionOptions(to="fap2d", size=128))
+    pkg = fap2d.package(fat2d.build(bare, fdp2, stream, deform, ConversionOptions(to="fap2d", size=128)))
     assert pkg.manifest["layers"][1]["source"] == "default"
-    mouth = fap2d_render._image(pkg.files["mouth.png"])
+    mouth = reference_render._image(pkg.files["mouth.png"])
     ys, xs = np.nonzero(mouth[..., 3])
     lips = np.array([pkg.manifest["feature_points"][k] for k in ("8.3", "8.4")])
     assert lips[:, 0].min() - 2 <= xs.min() and xs.max() <= lips[:, 0].max() + 2
@@ -170,8 +168,6 @@ def test_animation_bytes_reported(synthetic_package):
 
 @pytest.mark.parametrize("case", ["not-zip", "no-manifest", "short-data"])
 def test_reference_renderer_refuses_a_broken_package(case, synthetic_package):
-    from converter.errors import InputError
-
     pkg, data = synthetic_package
     if case == "not-zip":
         bad = b"PK\x03\x04 but not really a zip"
@@ -184,4 +180,4 @@ def test_reference_renderer_refuses_a_broken_package(case, synthetic_package):
                 z.writestr(name, body[:64] if (case == "short-data" and name == "data.bin") else body)
         bad = out.getvalue()
     with pytest.raises(InputError):
-        fap2d_render.load_package(bad)
+        reference_render.load_package(bad)

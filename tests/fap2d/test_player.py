@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import reference_render
 from player import canvas_rgba, flatten, player_frame, player_page, player_values
 from skimage.metrics import structural_similarity
-
-from converter import fap2d_render
 
 # Same-frame SSIM threshold. What differs between the two renderers is only how triangle edges are
 # anti-aliased (Skia's coverage-based clip vs the reference's pixel-centre rule) and Skia's bilinear filter vs
@@ -37,7 +36,7 @@ def lower_face_box(pkg) -> tuple[int, int, int, int]:
 @pytest.mark.browser
 def test_player_draws_the_reference_frames(browser, synthetic_package, artifacts):
     data = synthetic_package[1]
-    pkg = fap2d_render.load_package(data)
+    pkg = reference_render.load_package(data)
     box = lower_face_box(pkg)
     full = (0, 0, pkg.portrait.shape[1], pkg.portrait.shape[0])
     jaw = np.zeros(68)
@@ -45,36 +44,36 @@ def test_player_draws_the_reference_frames(browser, synthetic_package, artifacts
     half = jaw / 2
     with player_page(browser, data) as page:
         shown = player_values(page, jaw)
-        ref = fap2d_render.render_frame(pkg, jaw)
+        ref = reference_render.render_frame(pkg, jaw)
         same = ssim(shown, ref, box)
-        wrong = [ssim(shown, fap2d_render.render_frame(pkg, np.zeros(68)), box),
-                 ssim(shown, fap2d_render.render_frame(pkg, half), box)]
+        wrong = [ssim(shown, reference_render.render_frame(pkg, np.zeros(68)), box),
+                 ssim(shown, reference_render.render_frame(pkg, half), box)]
         from PIL import Image
 
         Image.fromarray(np.concatenate([shown, ref], axis=1)).save(artifacts / "fap2d_player_vs_reference.png")
         assert same >= SSIM_SAME, f"jaw-open frame: SSIM {same:.4f}"
         assert max(wrong) < SSIM_SAME - 0.03, f"wrong frames score too high: {wrong}"
         for k in (0, pkg.n_frames // 2, pkg.n_frames - 1):
-            score = ssim(player_frame(page, k), fap2d_render.render_stream_frame(pkg, k), full)
+            score = ssim(player_frame(page, k), reference_render.render_stream_frame(pkg, k), full)
             assert score >= SSIM_SAME, f"stream frame {k}: SSIM {score:.4f}"
 
 
 @pytest.mark.browser
 def test_player_draws_the_sample_face_like_the_reference(browser, joy_package, artifacts):
     """The bundled face driven by joy.fap through the real engine: same frames in Chromium and in Python."""
-    pkg = fap2d_render.load_package(joy_package)
+    pkg = reference_render.load_package(joy_package)
     full = (0, 0, pkg.portrait.shape[1], pkg.portrait.shape[0])
     box = lower_face_box(pkg)
     with player_page(browser, joy_package) as page:
         scores = {}
         for k in (0, 30, 60, 90):
             shown = player_frame(page, k)
-            ref = fap2d_render.render_stream_frame(pkg, k)
+            ref = reference_render.render_stream_frame(pkg, k)
             scores[k] = (ssim(shown, ref, full), ssim(shown, ref, box))
         assert min(s[0] for s in scores.values()) >= SSIM_SAME, scores
         assert min(s[1] for s in scores.values()) >= SSIM_SAME, scores
         # A neighbouring frame is told apart: the check can fail.
-        near = ssim(player_frame(page, 60), fap2d_render.render_stream_frame(pkg, 55), box)
+        near = ssim(player_frame(page, 60), reference_render.render_stream_frame(pkg, 55), box)
         assert near < SSIM_SAME - 0.03, near
 
 

@@ -13,7 +13,8 @@ from lxml import etree
 from converter.errors import InputError
 from converter.extract import extract, fit_camera
 from converter.options import ConversionOptions, Report
-from converter.writers import svg_gouraud, writer_for
+from converter.outputs import writer_for
+from converter.writers import svg_gouraud
 from converter.writers.gradients import exact_gradients
 from tests.gouraud.meshes import ellipsoid
 

@@ -1,4 +1,6 @@
-"""Reference renderer of a fap2d package: the frames static/fap2d.js draws, in numpy + Pillow + scipy, for tests."""
+"""Reference renderer of a fap2d package: the frames static/fap2d.js draws, in numpy + Pillow + scipy.
+
+Used by tests/fap2d and bench/bench_fap2d.py (both put this folder on sys.path, as for player.py)."""
 
 from __future__ import annotations
 
