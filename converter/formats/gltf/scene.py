@@ -1,44 +1,29 @@
-"""glTF 2.0 (.glb / .gltf) to FaceAnimation: node hierarchy, morph targets, animations, quantized and meshopt data.
+"""glTF scene to FaceAnimation: node hierarchy, meshes and primitives, morph targets, animation channels.
 
 Supported: TRS/matrix nodes, several meshes and primitives (triangles, strips, fans), morph targets (POSITION),
-translation/rotation/scale/weights animation with LINEAR (slerp for rotations), STEP and CUBICSPLINE samplers,
-COLOR_0 and baseColorFactor, sparse accessors, KHR_mesh_quantization and EXT_meshopt_compression. Texture and
-material extensions are ignored (we draw flat base colours). Skinned meshes are refused for now.
+translation/rotation/scale/weights animation (sampling.py), COLOR_0 and baseColorFactor. Bytes, accessors and
+meshopt decoding live in container.py, accessors.py and meshopt.py. Texture and material extensions are ignored
+(we draw flat base colours). Skinned meshes are refused for now.
 """
 
 from __future__ import annotations
 
-import base64
-import binascii
-import json
 import math
 import struct
 from pathlib import Path
-from urllib.parse import unquote
 
 import numpy as np
 
 from converter.animation import FaceAnimation
 from converter.errors import InputError
+from converter.formats.gltf.accessors import Accessors
+from converter.formats.gltf.container import parse_container
+from converter.formats.gltf.sampling import keyframe_rate, sample, trs_matrices
 from converter.formats.parts import collect_parts, part_name
 
 DEFAULT_FPS = 30.0
 MAX_FRAMES = 100_000
 MAX_FRAME_FLOATS = 1 << 28  # 1 GiB of float32 vertex positions over all frames
-MAX_DECODED_VIEW = 1 << 28  # bytes of one meshopt-decoded buffer view
-MAX_ACCESSOR_COMPONENTS = 1 << 26  # numbers in one accessor (a 20M-vertex mesh); bounds what a tiny file can allocate
-
-COMPONENT_DTYPES = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
-NORMALIZE_DIVISOR = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
-TYPE_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
-INDEX_TYPES = (5121, 5123, 5125)
-SUPPORTED_EXTENSIONS = {"KHR_mesh_quantization", "EXT_meshopt_compression"}
-# Extensions that only change how textures or materials look: safe to ignore when we draw flat base colours.
-IGNORABLE_EXTENSIONS = {
-    "KHR_texture_transform", "KHR_texture_basisu", "EXT_texture_webp", "EXT_texture_avif",
-    "KHR_materials_variants", "KHR_lights_punctual", "EXT_lights_image_based",
-}
-IGNORABLE_PREFIXES = ("KHR_materials_",)
 SKINNED = "skinned meshes are not supported yet; bake the skin to morph targets or a point cache"
 
 
@@ -58,235 +43,13 @@ def load_gltf(data: bytes, base_dir: Path, fps: float | None = None, name: str =
         raise InputError(f"{name}: the glTF file is malformed or truncated ({detail}); re-export it.") from None
 
 
-def parse_container(data: bytes, name: str = "glTF") -> tuple[dict, memoryview | None]:
-    """(JSON document, binary chunk or None) of a .glb or a .gltf JSON text."""
-    if not data:
-        raise InputError(f"{name} is empty; give a .glb or .gltf file.")
-    bin_chunk = None
-    if data[:4] == b"glTF":
-        if len(data) < 20:
-            raise InputError(f"{name} is truncated: the .glb header is incomplete.")
-        _, version, length = struct.unpack_from("<4sII", data)
-        if version != 2:
-            raise InputError(f"{name} is glTF version {version}; only glTF 2.0 is supported, re-export as glTF 2.0.")
-        if length > len(data):
-            raise InputError(f"{name} is truncated: the header says {length} bytes, the file has {len(data)}.")
-        view = memoryview(data)
-        pos, json_chunk = 12, None
-        while pos + 8 <= length:
-            clen, ctype = struct.unpack_from("<II", data, pos)
-            pos += 8
-            if pos + clen > length:
-                raise InputError(f"{name} is truncated: a chunk runs past the end of the file.")
-            if ctype == 0x4E4F534A and json_chunk is None:
-                json_chunk = bytes(view[pos:pos + clen])
-            elif ctype == 0x004E4942 and bin_chunk is None:
-                bin_chunk = view[pos:pos + clen]
-            pos += clen
-        if json_chunk is None:
-            raise InputError(f"{name} has no JSON chunk; the .glb is corrupt.")
-        text = json_chunk
-    else:
-        text = data
-    try:
-        doc = json.loads(bytes(text).decode("utf-8-sig"))
-    except (UnicodeDecodeError, ValueError, RecursionError):
-        raise InputError(f"{name}: the glTF JSON is garbled; re-export the file.") from None
-    if not isinstance(doc, dict) or not isinstance(doc.get("asset"), dict):
-        raise InputError(f"{name} is not a glTF document (no 'asset'); re-export it as glTF 2.0.")
-    version = str(doc["asset"].get("version", ""))
-    if not version.startswith("2"):
-        raise InputError(f"{name} is glTF version {version or '?'}; only glTF 2.0 is supported.")
-    return doc, bin_chunk
-
-
-class _Document:
-    """One parsed glTF with lazily loaded, cached buffers, views and accessors."""
+class _Document(Accessors):
+    """One parsed glTF: its default scene posed over the frames of an animation."""
 
     def __init__(self, doc: dict, bin_chunk: memoryview | None, base_dir: Path, name: str) -> None:
-        self.doc, self.bin, self.base_dir, self.name = doc, bin_chunk, base_dir, name
-        self._buffers: dict[int, memoryview] = {}
-        self._views: dict[int, memoryview] = {}
+        super().__init__(doc, bin_chunk, base_dir, name)
         self._prims: dict[int, list[dict]] = {}
-        required = doc.get("extensionsRequired") or []
-        unsupported = [e for e in required if e not in SUPPORTED_EXTENSIONS and e not in IGNORABLE_EXTENSIONS
-                       and not str(e).startswith(IGNORABLE_PREFIXES)]
-        if unsupported:
-            raise InputError(f"{name} requires the glTF extension {', '.join(map(str, unsupported))}, which facesvg "
-                             "does not support; re-export without it (e.g. with gltfpack, or uncompressed).")
 
-    def item(self, kind: str, index) -> dict:
-        """The JSON object kind[index] (e.g. "nodes", 3), or InputError when it does not exist."""
-        items = self.doc.get(kind) or []
-        if not isinstance(index, int) or isinstance(index, bool) or not 0 <= index < len(items):
-            raise InputError(f"{self.name}: {kind[:-1]} {index!r} does not exist; the glTF is corrupt.")
-        item = items[index]
-        if not isinstance(item, dict):
-            raise InputError(f"{self.name}: {kind[:-1]} {index} is not an object; the glTF is corrupt.")
-        return item
-
-    # -- bytes ---------------------------------------------------------------------------------------------
-    def buffer(self, index: int) -> memoryview:
-        """The bytes of buffer index: the .glb binary chunk, a data: URI, or a file next to the glTF."""
-        if index in self._buffers:
-            return self._buffers[index]
-        buf = self.item("buffers", index)
-        uri = buf.get("uri")
-        if uri is None:
-            if index != 0 or self.bin is None:
-                raise InputError(f"{self.name}: buffer {index} has no data (no uri and no .glb binary chunk).")
-            data = self.bin
-        elif uri.startswith("data:"):
-            head, _, payload = uri.partition(",")
-            if not head.endswith(";base64"):
-                raise InputError(f"{self.name}: buffer {index} has a data: URI that is not base64.")
-            try:
-                data = memoryview(base64.b64decode(payload, validate=True))
-            except (binascii.Error, ValueError):
-                raise InputError(f"{self.name}: buffer {index} has a garbled base64 data: URI.") from None
-        else:
-            data = memoryview(self._external(uri, index))
-        if len(data) < int(buf.get("byteLength", 0)):
-            raise InputError(f"{self.name}: buffer {index} is truncated ({len(data)} of {buf['byteLength']} bytes).")
-        self._buffers[index] = data
-        return data
-
-    def _external(self, uri: str, index: int) -> bytes:
-        """An external buffer file, refused when its path leaves base_dir."""
-        rel = unquote(uri)
-        if "://" in rel or rel.startswith(("/", "\\")) or (len(rel) > 1 and rel[1] == ":"):
-            raise InputError(f"{self.name}: buffer {index} points to {uri!r}; only files next to the glTF are read.")
-        root = self.base_dir.resolve()
-        path = (root / rel).resolve()
-        if not path.is_relative_to(root):
-            raise InputError(f"{self.name}: buffer {index} points outside the glTF's folder ({uri!r}); refusing it.")
-        try:
-            return path.read_bytes()
-        except OSError:
-            raise InputError(f"{self.name}: external buffer {uri!r} is missing; put it next to the .gltf.") from None
-
-    def view(self, index: int) -> memoryview:
-        """The bytes of buffer view index, meshopt-decoded when compressed."""
-        if index in self._views:
-            return self._views[index]
-        bv = self.item("bufferViews", index)
-        ext = (bv.get("extensions") or {}).get("EXT_meshopt_compression")
-        if ext is not None:
-            data = self._meshopt(ext, index)
-        else:
-            buf = self.buffer(bv["buffer"])
-            off, length = int(bv.get("byteOffset", 0)), int(bv["byteLength"])
-            if off < 0 or length < 0 or off + length > len(buf):
-                raise InputError(f"{self.name}: buffer view {index} runs past the end of its buffer; "
-                                 "the file is truncated.")
-            data = buf[off:off + length]
-        self._views[index] = data
-        return data
-
-    def _meshopt(self, ext: dict, index: int) -> memoryview:
-        """Decode one EXT_meshopt_compression buffer view with meshoptimizer's decoders."""
-        import meshoptimizer as mo
-
-        src_buf = self.buffer(ext["buffer"])
-        off, length = int(ext.get("byteOffset", 0)), int(ext["byteLength"])
-        count, stride = int(ext["count"]), int(ext["byteStride"])
-        mode, filt = ext["mode"], ext.get("filter", "NONE")
-        if off < 0 or length < 0 or off + length > len(src_buf):
-            raise InputError(f"{self.name}: compressed buffer view {index} runs past its buffer; the file is truncated.")
-        if count < 1 or stride < 1 or count * stride > MAX_DECODED_VIEW:
-            raise InputError(f"{self.name}: compressed buffer view {index} has an invalid size.")
-        src = np.frombuffer(src_buf[off:off + length], np.uint8)
-        # The C decoders assert on these preconditions, so check them first rather than crash the process.
-        try:
-            if mode == "ATTRIBUTES":
-                if stride % 4 or stride > 256:
-                    raise InputError(f"{self.name}: compressed buffer view {index} has byteStride {stride} "
-                                     "(needs a multiple of 4 up to 256).")
-                decoded = np.ascontiguousarray(mo.decode_vertex_buffer(count, stride, src))
-                out = decoded.view(np.uint8).reshape(count, stride)
-            elif mode in ("TRIANGLES", "INDICES"):
-                if stride not in (2, 4) or (mode == "TRIANGLES" and count % 3):
-                    raise InputError(f"{self.name}: compressed index view {index} has an invalid count or stride.")
-                decode = mo.decode_index_buffer if mode == "TRIANGLES" else mo.decode_index_sequence
-                idx = decode(count, 4, src)
-                if stride == 2 and idx.size and idx.max() > 0xFFFF:
-                    raise InputError(f"{self.name}: compressed index view {index} does not fit 16 bits.")
-                out = idx.astype("<u2" if stride == 2 else "<u4").view(np.uint8).reshape(count, stride)
-            else:
-                raise InputError(f"{self.name}: buffer view {index} uses unknown meshopt mode {mode!r}.")
-        except RuntimeError:
-            raise InputError(f"{self.name}: compressed buffer view {index} does not decode; "
-                             "the file is corrupt.") from None
-        if filt != "NONE":
-            if mode != "ATTRIBUTES":
-                raise InputError(f"{self.name}: buffer view {index} applies filter {filt} to indices.")
-            checks = {"OCTAHEDRAL": stride in (4, 8), "QUATERNION": stride == 8, "EXPONENTIAL": stride % 4 == 0}
-            if filt not in checks:
-                raise InputError(f"{self.name}: buffer view {index} uses unknown meshopt filter {filt!r}.")
-            if not checks[filt]:
-                raise InputError(f"{self.name}: buffer view {index} has byteStride {stride}, invalid for filter {filt}.")
-            fn = {"OCTAHEDRAL": mo.decode_filter_oct, "QUATERNION": mo.decode_filter_quat,
-                  "EXPONENTIAL": mo.decode_filter_exp}[filt]
-            out = fn(np.ascontiguousarray(out), count, stride)
-        return memoryview(np.ascontiguousarray(out).reshape(-1).tobytes())
-
-    # -- accessors ----------------------------------------------------------------------------------------
-    def accessor(self, index: int, normalize: bool = True) -> np.ndarray:
-        """Accessor data as (count, components) float64 (normalized integers mapped to [-1, 1] / [0, 1])."""
-        acc = self.item("accessors", index)
-        ctype = acc["componentType"]
-        if ctype not in COMPONENT_DTYPES or acc.get("type") not in TYPE_COMPONENTS:
-            raise InputError(f"{self.name}: accessor {index} has an unknown component type or type.")
-        dtype = np.dtype(COMPONENT_DTYPES[ctype])
-        nc = TYPE_COMPONENTS[acc["type"]]
-        count = int(acc["count"])
-        if count < 1 or count * nc > MAX_ACCESSOR_COMPONENTS:
-            raise InputError(f"{self.name}: accessor {index} has an invalid count {count}.")
-        if acc.get("bufferView") is not None:
-            arr = self._strided(acc["bufferView"], int(acc.get("byteOffset", 0)), count, nc, dtype, index)
-        else:
-            arr = np.zeros((count, nc), dtype)
-        sparse = acc.get("sparse")
-        if sparse is not None:
-            n = int(sparse["count"])
-            if not 1 <= n <= count:
-                raise InputError(f"{self.name}: sparse accessor {index} has an invalid count {n}.")
-            ind, val = sparse["indices"], sparse["values"]
-            if ind["componentType"] not in INDEX_TYPES:
-                raise InputError(f"{self.name}: sparse accessor {index} has non-integer indices.")
-            where = self._strided(ind["bufferView"], int(ind.get("byteOffset", 0)), n, 1,
-                                  np.dtype(COMPONENT_DTYPES[ind["componentType"]]), index, packed=True)[:, 0]
-            if where.max() >= count:
-                raise InputError(f"{self.name}: sparse accessor {index} writes past its {count} elements.")
-            arr = arr.copy()
-            arr[where.astype(np.int64)] = self._strided(val["bufferView"], int(val.get("byteOffset", 0)), n, nc, dtype,
-                                                        index, packed=True)
-        if not normalize:
-            return arr
-        out = arr.astype(np.float64)
-        if acc.get("normalized") and ctype in NORMALIZE_DIVISOR:
-            out = np.maximum(out / NORMALIZE_DIVISOR[ctype], -1.0)
-        return out
-
-    def _strided(self, view_index: int, offset: int, count: int, nc: int, dtype: np.dtype, acc_index: int,
-                 packed: bool = False) -> np.ndarray:
-        """count rows of nc components from a buffer view, honouring its byteStride (unless packed)."""
-        view = self.view(view_index)
-        elem = dtype.itemsize * nc
-        stride = elem if packed else int(self.item("bufferViews", view_index).get("byteStride") or elem)
-        if offset < 0 or stride < elem or offset + stride * (count - 1) + elem > len(view):
-            raise InputError(f"{self.name}: accessor {acc_index} reads past the end of its buffer view; the file is "
-                             "truncated or corrupt.")
-        return np.ndarray((count, nc), dtype, buffer=view, offset=offset, strides=(stride, dtype.itemsize)).copy()
-
-    def indices(self, index: int) -> np.ndarray:
-        """An index accessor as int64."""
-        acc = self.item("accessors", index)
-        if acc.get("componentType") not in INDEX_TYPES or acc.get("type") != "SCALAR":
-            raise InputError(f"{self.name}: index accessor {index} is not unsigned integer scalars.")
-        return self.accessor(index, normalize=False)[:, 0].astype(np.int64)
-
-    # -- scene --------------------------------------------------------------------------------------------
     def scene_nodes(self) -> list[tuple[int, int]]:
         """(node, parent or -1) for every node of the default scene, parents first."""
         nodes = self.doc.get("nodes") or []
@@ -551,92 +314,3 @@ def triangles(idx: np.ndarray, mode: int) -> np.ndarray:
         odd = k % 2 == 1  # odd strip triangles swap two corners to keep the winding
         return np.stack([idx[k], np.where(odd, idx[k + 2], idx[k + 1]), np.where(odd, idx[k + 1], idx[k + 2])], 1)
     return np.stack([np.full(n, idx[0]), idx[k + 1], idx[k + 2]], 1)
-
-
-def sample(times: np.ndarray, values: np.ndarray, interp: str, t: np.ndarray, rotation: bool = False) -> np.ndarray:
-    """A glTF sampler evaluated at times t, clamped outside its keys: (len(t), C)."""
-    n = len(times)
-    if interp == "CUBICSPLINE":
-        v = values.reshape(n, 3, -1)
-        a, p, b = v[:, 0], v[:, 1], v[:, 2]
-    else:
-        p = values
-    if rotation:
-        p = p / np.linalg.norm(p, axis=1, keepdims=True)
-    if n == 1:
-        return np.repeat(p[:1], len(t), axis=0)
-    # Keys are float32: a key at 0.3 s is stored as 0.30000001, so snap sample times within float32 error.
-    after = np.searchsorted(times, t + np.maximum(1e-6, np.abs(t) * 1e-6), side="right") - 1
-    if interp == "STEP":
-        return p[np.clip(after, 0, n - 1)]
-    k = np.clip(after, 0, n - 2)
-    dt = times[k + 1] - times[k]
-    u = np.clip(np.where(dt > 0, (t - times[k]) / np.where(dt > 0, dt, 1.0), 1.0), 0.0, 1.0)[:, None]
-    if interp == "LINEAR":
-        if rotation:
-            return slerp(p[k], p[k + 1], u)
-        return p[k] * (1 - u) + p[k + 1] * u
-    u2, u3, d = u * u, u * u * u, dt[:, None]
-    out = ((2 * u3 - 3 * u2 + 1) * p[k] + (u3 - 2 * u2 + u) * d * b[k]
-           + (-2 * u3 + 3 * u2) * p[k + 1] + (u3 - u2) * d * a[k + 1])
-    if rotation:
-        out = out / np.linalg.norm(out, axis=1, keepdims=True)
-    return out
-
-
-def slerp(q0: np.ndarray, q1: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Spherical linear interpolation of unit quaternions along the shorter arc, rows (x, y, z, w)."""
-    d = np.sum(q0 * q1, axis=1, keepdims=True)
-    q1 = np.where(d < 0, -q1, q1)
-    d = np.abs(d)
-    theta = np.arccos(np.clip(d, -1.0, 1.0))
-    s = np.sin(theta)
-    near = s < 1e-6
-    safe = np.where(near, 1.0, s)
-    w0 = np.where(near, 1 - u, np.sin((1 - u) * theta) / safe)
-    w1 = np.where(near, u, np.sin(u * theta) / safe)
-    q = w0 * q0 + w1 * q1
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
-
-
-def trs_matrices(t: np.ndarray, q: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """(N, 4, 4) matrices T * R * S from broadcastable (N|1, 3) translations, (x, y, z, w) quaternions, scales."""
-    n = max(len(t), len(q), len(s))
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    x, y, z, w = (np.broadcast_to(q[:, i], (n,)) for i in range(4))
-    r = np.empty((n, 3, 3))
-    r[:, 0, 0] = 1 - 2 * (y * y + z * z)
-    r[:, 0, 1] = 2 * (x * y - z * w)
-    r[:, 0, 2] = 2 * (x * z + y * w)
-    r[:, 1, 0] = 2 * (x * y + z * w)
-    r[:, 1, 1] = 1 - 2 * (x * x + z * z)
-    r[:, 1, 2] = 2 * (y * z - x * w)
-    r[:, 2, 0] = 2 * (x * z - y * w)
-    r[:, 2, 1] = 2 * (y * z + x * w)
-    r[:, 2, 2] = 1 - 2 * (x * x + y * y)
-    m = np.zeros((n, 4, 4))
-    m[:, :3, :3] = r * np.broadcast_to(s, (n, 3))[:, None, :]
-    m[:, :3, 3] = np.broadcast_to(t, (n, 3))
-    m[:, 3, 3] = 1.0
-    return m
-
-
-def keyframe_rate(all_times: list[np.ndarray]) -> float | None:
-    """The frame rate keys were baked at when evident (every gap a whole number of one step, 12..240 fps)."""
-    if not all_times:
-        return None
-    times = np.unique(np.concatenate(all_times))
-    if len(times) < 3:
-        return None
-    gaps = np.diff(times)
-    step = gaps.min()
-    if step <= 0:
-        return None
-    ratio = gaps / step
-    if np.abs(ratio - np.round(ratio)).max() > 1e-3:
-        return None
-    rate = 1.0 / step
-    if not 12.0 <= rate <= 240.0:
-        return None
-    whole = round(rate)
-    return float(whole) if abs(rate - whole) < 1e-3 * rate else round(rate, 3)
