@@ -15,7 +15,7 @@ def cmd_clone(args: argparse.Namespace) -> int:
     from converter.cli import raise_input
     from converter.cloning import clone
     from converter.convert import write_atomic
-    from converter.formats.gltf_write import write_glb
+    from converter.export.glb import write_glb
 
     out = Path(args.output)
     if out.suffix.lower() != ".glb":

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from converter.formats.gltf_build import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder
+from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder
 
 TRI = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
 

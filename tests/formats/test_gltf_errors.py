@@ -12,7 +12,7 @@ import pytest
 from converter.errors import InputError
 from converter.formats import load
 from converter.formats.gltf import load_gltf
-from converter.formats.gltf_build import ARRAY_BUFFER, GltfBuilder
+from converter.export.gltf_builder import ARRAY_BUFFER, GltfBuilder
 from tests.formats.helpers import add_track, triangle_scene
 
 HERE = Path(".")
