@@ -39,6 +39,7 @@ def add_conversion_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--shading", default="flat", help="flat (default), gouraud, gouraud-chapter")
     p.add_argument("--frame", type=int, help="write a still of this frame instead of the animation")
     p.add_argument("--fps", type=float, help="resample to this frame rate (default: the source's, else 30)")
+    p.add_argument("--animation", help="glTF animation to play: NAME, INDEX or all (default: the first take)")
     p.add_argument("--size", type=int, default=512, help="output size in pixels (default 512)")
     p.add_argument("--yaw", type=float, default=0.0, help="camera degrees around the vertical axis")
     p.add_argument("--pitch", type=float, default=0.0, help="camera degrees up or down")
@@ -95,7 +96,7 @@ def cmd_info(args: argparse.Namespace) -> int:
     """facesvg info INPUT."""
     from converter import formats
 
-    anim = formats.load(args.input, cache=args.cache)
+    anim = formats.load(args.input, cache=args.cache, animation=args.animation)
     info = {
         "name": anim.name,
         "frames": anim.n_frames,
@@ -110,6 +111,11 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(json.dumps(info, indent=2, sort_keys=True))
     else:
         for k, v in info.items():
+            if k == "animations":  # one line per clip
+                for clip in v:
+                    print(f"{'animation':>16}: {clip['index']} {clip['name'] or '(unnamed)'}: {clip['duration']} s, "
+                          f"{clip['channels']} channels, targets {', '.join(clip['targets']) or 'none'}")
+                continue
             print(f"{k:>16}: {v}")
     return 0
 
@@ -139,6 +145,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("info", help="describe an input animation")
     p.add_argument("input")
     p.add_argument("--cache", help="PC2 or MDD point cache for an OBJ input")
+    p.add_argument("--animation", help="glTF animation to describe: NAME, INDEX or all (default: the first take)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_info)
 

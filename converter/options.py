@@ -27,6 +27,7 @@ class ConversionOptions:
     shading: str = "flat"  # flat | gouraud (exact gradients) | gouraud-chapter (three-gradient filters)
     frame: int | None = None  # write a still of this frame instead of the animation
     fps: float | None = None  # resample to this rate; None keeps the source's rate (else 30)
+    animation: str | None = None  # glTF animation to play: NAME, INDEX or all; None = the first take (or clip)
     size: int = 512  # output viewport in pixels (square)
     yaw: float = 0.0  # camera degrees around the vertical axis, 0 = front
     pitch: float = 0.0  # camera degrees up/down

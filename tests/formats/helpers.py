@@ -25,11 +25,14 @@ def triangle_scene(b: GltfBuilder | None = None, positions: np.ndarray = TRI, ma
     return b, n
 
 
-def add_track(b: GltfBuilder, node: int, path: str, times, values, interp: str = "LINEAR") -> None:
-    """One animation channel (all channels go to animation 0)."""
-    if "animations" not in b.doc:
+def add_track(b: GltfBuilder, node: int, path: str, times, values, interp: str = "LINEAR", anim: int = 0,
+              name: str | None = None) -> None:
+    """One animation channel in animation anim (created, with name, when missing)."""
+    while len(b.doc.get("animations", [])) <= anim:
         b.add("animations", {"samplers": [], "channels": []})
-    anim = b.doc["animations"][0]
+    if name is not None:
+        b.doc["animations"][anim]["name"] = name
+    anim = b.doc["animations"][anim]
     t = b.accessor(np.asarray(times, np.float32)[:, None], minmax=True)
     v = np.asarray(values, np.float32)
     out = b.accessor(v.reshape(-1, 1) if path == "weights" else v, "SCALAR" if path == "weights" else None)

@@ -17,6 +17,7 @@ import numpy as np
 from converter.animation import FaceAnimation
 from converter.errors import InputError
 from converter.formats.gltf.accessors import Accessors
+from converter.formats.gltf.clips import Tracks, choose, clip_label, summaries
 from converter.formats.gltf.container import parse_container
 from converter.formats.gltf.sampling import keyframe_rate, sample, trs_matrices
 from converter.formats.parts import collect_parts, part_name
@@ -27,14 +28,18 @@ MAX_FRAME_FLOATS = 1 << 28  # 1 GiB of float32 vertex positions over all frames
 SKINNED = "skinned meshes are not supported yet; bake the skin to morph targets or a point cache"
 
 
-def load_gltf(data: bytes, base_dir: Path, fps: float | None = None, name: str = "face") -> FaceAnimation:
-    """Read a .glb or .gltf (bytes) into a FaceAnimation resampled at fps (default: the source's rate, else 30)."""
+def load_gltf(data: bytes, base_dir: Path, fps: float | None = None, name: str = "face",
+              animation: str | None = None) -> FaceAnimation:
+    """Read a .glb or .gltf (bytes) into a FaceAnimation resampled at fps (default: the source's rate, else 30).
+
+    animation picks the clip: a name, an index, "all", or None for the first take (see clips.py).
+    """
     if fps is not None and not (math.isfinite(fps) and fps > 0):
         raise InputError(f"fps must be a positive number, got {fps}.")
     try:
         with np.errstate(all="ignore"):
             doc, bin_chunk = parse_container(data, name)
-            return _Document(doc, bin_chunk, Path(base_dir), name).animation(fps)
+            return _Document(doc, bin_chunk, Path(base_dir), name).animation(fps, animation)
     except InputError:
         raise
     except (KeyError, IndexError, TypeError, ValueError, AttributeError, OverflowError, RecursionError,
@@ -73,63 +78,61 @@ class _Document(Accessors):
             stack.extend((c, node) for c in reversed(self.item("nodes", node).get("children") or []))
         return order
 
-    def animation(self, fps: float | None) -> FaceAnimation:
-        """The default scene's meshes posed at every frame of the first animation."""
+    def animation(self, fps: float | None, choice: str | None = None) -> FaceAnimation:
+        """The default scene's meshes posed at every frame of the chosen animations (None: the first take)."""
         order = self.scene_nodes()
         instances = self.mesh_instances(order)
-        tracks, anim_name = self.tracks()
-        all_times = [t for t, _, _ in tracks.values()]
+        anims = self.doc.get("animations") or []
+        clips = [self.clip(j) for j in range(len(anims))]
+        clip_names = [None if a.get("name") is None else str(a["name"]) for a in anims]
+        chosen, notes = choose(clips, clip_names, choice, self.name)
+        played = [{key: track for j in take for key, track in clips[j].items()} for take in chosen]
+        all_times = [t for tracks in played for t, _, _ in tracks.values()]
         source_fps = keyframe_rate(all_times)
         out_fps = float(fps) if fps else (source_fps or DEFAULT_FPS)
-        t_end = max((float(t[-1]) for t in all_times), default=0.0)
+        ends = [max((float(t[-1]) for t, _, _ in tracks.values()), default=0.0) for tracks in played]
         # Key times are float32: a time within 1/1000 of a frame still makes that frame.
-        n_frames = int(math.floor(max(t_end, 0.0) * out_fps + 1e-3)) + 1
-        if n_frames > MAX_FRAMES:
-            raise InputError(f"{self.name}: the animation lasts {t_end:.0f} s, too long to convert; trim it.")
+        counts = [int(math.floor(max(end, 0.0) * out_fps + 1e-3)) + 1 for end in ends]
+        if sum(counts) > MAX_FRAMES:
+            raise InputError(f"{self.name}: the animation lasts {sum(ends):.0f} s, too long to convert; trim it.")
         n_vertices = sum(len(p["positions"]) for *_, prims in instances for p in prims)
-        if n_frames * n_vertices * 3 > MAX_FRAME_FLOATS:
-            raise InputError(f"{self.name}: {n_vertices} vertices x {n_frames} frames is too much to convert; "
+        if sum(counts) * n_vertices * 3 > MAX_FRAME_FLOATS:
+            raise InputError(f"{self.name}: {n_vertices} vertices x {sum(counts)} frames is too much to convert; "
                              "lower --fps or trim the animation.")
-        t = np.arange(n_frames) / out_fps
-        world: dict[int, np.ndarray] = {}
-        for node, parent in order:
-            local = self.local_matrix(node, tracks, t)
-            world[node] = local if parent < 0 else world[parent] @ local
-
-        frames = np.empty((n_frames, n_vertices, 3), np.float32)
+        frames = np.concatenate([self.pose(order, instances, n_vertices, tracks, np.arange(n) / out_fps)
+                                 for tracks, n in zip(played, counts)])
         faces, keys, key_of_face, colors = [], [], [], []
         morph_names: list[str] = []
         morph_count = offset = 0
-        for node_index, node, mesh, prims in instances:
+        for _, node, mesh, prims in instances:
             k = prims[0]["deltas"].shape[0]
-            weights = self.weights(node_index, node, mesh, k, tracks, t)
             morph_count += k
             names = ((mesh.get("extras") or {}).get("targetNames") or []) if k else []
             morph_names += [str(n) for n in names if str(n) not in morph_names]
-            m = world[node_index]
             for p in prims:
-                v = p["positions"]
-                local = v[None]
-                if k:
-                    # einsum, not @: a small product through multithreaded BLAS is 100x slower on a busy machine.
-                    local = local + np.einsum("tk,kvc->tvc", weights, p["deltas"])
-                frames[:, offset:offset + len(v)] = local @ np.swapaxes(m[:, :3, :3], 1, 2) + m[:, None, :3, 3]
                 faces.append(p["faces"] + offset)
                 material = self.item("materials", p["material"]) if p["material"] is not None else {}
                 keys.append((part_name(material.get("name"), mesh.get("name"), node.get("name")),
                              self.base_color(material)))
                 key_of_face.append(np.full(len(p["faces"]), len(keys) - 1, np.int32))
-                colors.append(np.ones((len(v), 3), np.float32) if p["colors"] is None else p["colors"])
-                offset += len(v)
+                colors.append(np.ones((len(p["positions"]), 3), np.float32) if p["colors"] is None else p["colors"])
+                offset += len(p["positions"])
         parts, part_of_key = collect_parts(keys)
         has_colors = any(p["colors"] is not None for *_, prims in instances for p in prims)
+        flat = [j for take in chosen for j in take]
         extras = {
             "morph_targets": morph_names if morph_names else morph_count,
-            "animated_nodes": sorted({self.node_label(n) for (n, path) in tracks if path != "weights"}),
-            "morph_animated_nodes": sorted({self.node_label(n) for (n, path) in tracks if path == "weights"}),
+            "animated_nodes": sorted({self.node_label(n) for tracks in played for (n, path) in tracks
+                                      if path != "weights"}),
+            "morph_animated_nodes": sorted({self.node_label(n) for tracks in played for (n, path) in tracks
+                                            if path == "weights"}),
             "source_fps": source_fps,
-            "animation": anim_name,
+            "animation": (clip_names[flat[0]] if len(flat) == 1 else
+                          " + ".join(clip_label(j, clip_names[j]) for j in flat) or None),
+            "animations": summaries(clips, clip_names, self.node_label),
         }
+        if notes:
+            extras["warnings"] = notes
         return FaceAnimation(
             frames=frames,
             faces=np.concatenate(faces).astype(np.int32),
@@ -140,6 +143,29 @@ class _Document(Accessors):
             vertex_colors=np.concatenate(colors) if has_colors else None,
             extras=extras,
         )
+
+    def pose(self, order: list[tuple[int, int]], instances: list, n_vertices: int, tracks: Tracks,
+             t: np.ndarray) -> np.ndarray:
+        """(len(t), V, 3) world positions of every mesh instance's vertices at times t under one take's tracks."""
+        world: dict[int, np.ndarray] = {}
+        for node, parent in order:
+            local = self.local_matrix(node, tracks, t)
+            world[node] = local if parent < 0 else world[parent] @ local
+        frames = np.empty((len(t), n_vertices, 3), np.float32)
+        offset = 0
+        for node_index, node, mesh, prims in instances:
+            k = prims[0]["deltas"].shape[0]
+            weights = self.weights(node_index, node, mesh, k, tracks, t)
+            m = world[node_index]
+            for p in prims:
+                v = p["positions"]
+                local = v[None]
+                if k:
+                    # einsum, not @: a small product through multithreaded BLAS is 100x slower on a busy machine.
+                    local = local + np.einsum("tk,kvc->tvc", weights, p["deltas"])
+                frames[:, offset:offset + len(v)] = local @ np.swapaxes(m[:, :3, :3], 1, 2) + m[:, None, :3, 3]
+                offset += len(v)
+        return frames
 
     def mesh_instances(self, order: list[tuple[int, int]]) -> list[tuple[int, dict, dict, list[dict]]]:
         """(node index, node, mesh, triangle primitives) for every node that draws a mesh."""
@@ -229,12 +255,9 @@ class _Document(Accessors):
         cache[mesh_index] = out
         return out
 
-    def tracks(self) -> tuple[dict[tuple[int, str], tuple[np.ndarray, np.ndarray, str]], str | None]:
-        """The first animation's channels: (node, path) -> (times, values (keys, C), interpolation)."""
-        anims = self.doc.get("animations") or []
-        if not anims:
-            return {}, None
-        anim = anims[0]
+    def clip(self, index: int) -> Tracks:
+        """Animation index's channels: (node, path) -> (times, values (keys, C), interpolation)."""
+        anim = self.item("animations", index)
         samplers = anim.get("samplers") or []
         out = {}
         for ch in anim.get("channels") or []:
@@ -265,7 +288,7 @@ class _Document(Accessors):
             elif len(values) != keys:
                 raise InputError(f"{self.name}: a {path} track has {len(values)} values for {len(times)} key times.")
             out[(node, path)] = (times, values, interp)
-        return out, anim.get("name")
+        return out
 
     def local_matrix(self, index: int, tracks: dict, t: np.ndarray) -> np.ndarray:
         """(T or 1, 4, 4) local transform of a node over the frame times."""
