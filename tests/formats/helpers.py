@@ -38,3 +38,25 @@ def add_track(b: GltfBuilder, node: int, path: str, times, values, interp: str =
     out = b.accessor(v.reshape(-1, 1) if path == "weights" else v, "SCALAR" if path == "weights" else None)
     anim["samplers"].append({"input": t, "output": out, "interpolation": interp})
     anim["channels"].append({"sampler": len(anim["samplers"]) - 1, "target": {"node": node, "path": path}})
+
+
+def skinned_triangle(joints=None, weights=None, n_joints: int = 1, inverse_bind: np.ndarray | None = None,
+                     joints_dtype=np.uint8) -> tuple[GltfBuilder, int, list[int]]:
+    """The triangle skinned to n_joints chained joint nodes (returned with the mesh node), all weight on joint 0."""
+    b = GltfBuilder("tests")
+    joints = np.zeros((3, 4), joints_dtype) if joints is None else np.asarray(joints, joints_dtype)
+    weights = np.float32([[1, 0, 0, 0]] * 3) if weights is None else np.asarray(weights, np.float32)
+    attrs = {"POSITION": b.accessor(TRI, minmax=True, target=ARRAY_BUFFER),
+             "JOINTS_0": b.accessor(joints, target=ARRAY_BUFFER),
+             "WEIGHTS_0": b.accessor(weights, target=ARRAY_BUFFER)}
+    mesh = b.add("meshes", {"primitives": [{"attributes": attrs}]})
+    joint_nodes = [b.add("nodes", {"name": f"joint{i}"}) for i in range(n_joints)]
+    for parent, child in zip(joint_nodes, joint_nodes[1:]):
+        b.doc["nodes"][parent]["children"] = [child]
+    skin = {"joints": joint_nodes}
+    if inverse_bind is not None:
+        skin["inverseBindMatrices"] = b.accessor(np.ascontiguousarray(inverse_bind, np.float32).reshape(-1, 16),
+                                                 "MAT4")
+    node = b.add("nodes", {"name": "body", "mesh": mesh, "skin": b.add("skins", skin)})
+    b.add("scenes", {"nodes": [node, joint_nodes[0]]})
+    return b, node, joint_nodes

@@ -2,8 +2,8 @@
 
 Supported: TRS/matrix nodes, several meshes and primitives (triangles, strips, fans), morph targets (POSITION),
 translation/rotation/scale/weights animation (sampling.py), COLOR_0 and baseColorFactor. Bytes, accessors and
-meshopt decoding live in container.py, accessors.py and meshopt.py. Texture and material extensions are ignored
-(we draw flat base colours). Skinned meshes are refused for now.
+meshopt decoding live in container.py, accessors.py and meshopt.py; clip choice in clips.py; skinning in skin.py.
+Texture and material extensions are ignored (we draw flat base colours).
 """
 
 from __future__ import annotations
@@ -20,12 +20,12 @@ from converter.formats.gltf.accessors import Accessors
 from converter.formats.gltf.clips import Tracks, choose, clip_label, summaries
 from converter.formats.gltf.container import parse_container
 from converter.formats.gltf.sampling import keyframe_rate, sample, trs_matrices
+from converter.formats.gltf.skin import check_joint_indices, influences, joint_matrices, skin_positions
 from converter.formats.parts import collect_parts, part_name
 
 DEFAULT_FPS = 30.0
 MAX_FRAMES = 100_000
 MAX_FRAME_FLOATS = 1 << 28  # 1 GiB of float32 vertex positions over all frames
-SKINNED = "skinned meshes are not supported yet; bake the skin to morph targets or a point cache"
 
 
 def load_gltf(data: bytes, base_dir: Path, fps: float | None = None, name: str = "face",
@@ -54,6 +54,7 @@ class _Document(Accessors):
     def __init__(self, doc: dict, bin_chunk: memoryview | None, base_dir: Path, name: str) -> None:
         super().__init__(doc, bin_chunk, base_dir, name)
         self._prims: dict[int, list[dict]] = {}
+        self._parents: dict[int, int] | None = None
 
     def scene_nodes(self) -> list[tuple[int, int]]:
         """(node, parent or -1) for every node of the default scene, parents first."""
@@ -127,6 +128,7 @@ class _Document(Accessors):
             "morph_animated_nodes": sorted({self.node_label(n) for tracks in played for (n, path) in tracks
                                             if path == "weights"}),
             "source_fps": source_fps,
+            "skinned_meshes": sum(1 for _, node, _, _ in instances if node.get("skin") is not None),
             "animation": (clip_names[flat[0]] if len(flat) == 1 else
                           " + ".join(clip_label(j, clip_names[j]) for j in flat) or None),
             "animations": summaries(clips, clip_names, self.node_label),
@@ -157,15 +159,63 @@ class _Document(Accessors):
             k = prims[0]["deltas"].shape[0]
             weights = self.weights(node_index, node, mesh, k, tracks, t)
             m = world[node_index]
+            if node.get("skin") is not None:
+                joint_nodes, inverse_bind = self.skin(node["skin"])
+                matrices = joint_matrices([self.world_of(j, world, tracks, t) for j in joint_nodes], inverse_bind,
+                                          len(t))
             for p in prims:
                 v = p["positions"]
                 local = v[None]
                 if k:
                     # einsum, not @: a small product through multithreaded BLAS is 100x slower on a busy machine.
                     local = local + np.einsum("tk,kvc->tvc", weights, p["deltas"])
-                frames[:, offset:offset + len(v)] = local @ np.swapaxes(m[:, :3, :3], 1, 2) + m[:, None, :3, 3]
+                if node.get("skin") is not None:  # the node's own transform is ignored (glTF 2.0, skins)
+                    check_joint_indices(p["joints"], p["weights"], len(joint_nodes), self.name,
+                                        self.node_label(node_index))
+                    frames[:, offset:offset + len(v)] = skin_positions(local, p["joints"], p["weights"], matrices)
+                else:
+                    frames[:, offset:offset + len(v)] = local @ np.swapaxes(m[:, :3, :3], 1, 2) + m[:, None, :3, 3]
                 offset += len(v)
         return frames
+
+    def world_of(self, index: int, world: dict[int, np.ndarray], tracks: Tracks, t: np.ndarray) -> np.ndarray:
+        """A node's global transform (T or 1, 4, 4), also for a joint outside the default scene's tree."""
+        chain: list[int] = []  # index and its ancestors not yet in world, child first
+        node: int | None = index
+        while node is not None and node not in world:
+            if node in chain:
+                raise InputError(f"{self.name}: node {node} is its own ancestor (a cycle); the file is corrupt.")
+            chain.append(node)
+            node = self.parents().get(node)
+        m = None if node is None else world[node]
+        for n in reversed(chain):
+            local = self.local_matrix(n, tracks, t)
+            m = local if m is None else m @ local
+            world[n] = m
+        return world[index]
+
+    def parents(self) -> dict[int, int]:
+        """Parent of every child node in the document (cached)."""
+        if self._parents is None:
+            self._parents = {c: i for i, n in enumerate(self.doc.get("nodes") or []) if isinstance(n, dict)
+                             for c in n.get("children") or [] if isinstance(c, int)}
+        return self._parents
+
+    def skin(self, index: int) -> tuple[list[int], np.ndarray]:
+        """(joint node indices, inverse bind matrices (J, 4, 4)) of skin index; identity matrices when absent."""
+        skin = self.item("skins", index)
+        joints = skin.get("joints") or []
+        if not joints:
+            raise InputError(f"{self.name}: skin {index} has no joints; re-export the rig.")
+        for j in joints:
+            self.item("nodes", j)
+        if skin.get("inverseBindMatrices") is None:
+            return list(joints), np.broadcast_to(np.eye(4), (len(joints), 4, 4))
+        ibm = self.accessor(skin["inverseBindMatrices"])
+        if ibm.shape[1] != 16 or len(ibm) < len(joints):
+            raise InputError(f"{self.name}: skin {index} has {len(ibm)} inverse bind matrices for {len(joints)} "
+                             "joints; re-export the rig.")
+        return list(joints), ibm[:len(joints)].reshape(-1, 4, 4).transpose(0, 2, 1)  # glTF stores column-major
 
     def mesh_instances(self, order: list[tuple[int, int]]) -> list[tuple[int, dict, dict, list[dict]]]:
         """(node index, node, mesh, triangle primitives) for every node that draws a mesh."""
@@ -174,9 +224,12 @@ class _Document(Accessors):
             node = self.item("nodes", index)
             if node.get("mesh") is None:
                 continue
-            if node.get("skin") is not None:
-                raise InputError(f"{self.name}: {SKINNED}.")
             prims = self.primitives(node["mesh"])
+            if node.get("skin") is not None:
+                self.skin(node["skin"])
+                if any(p["joints"] is None for p in prims):
+                    raise InputError(f"{self.name}: node {self.node_label(index)} has a skin but its mesh has no "
+                                     "JOINTS_0/WEIGHTS_0; re-export the skinned mesh.")
             if prims:
                 if len({p["deltas"].shape[0] for p in prims}) != 1:
                     raise InputError(f"{self.name}: primitives of mesh {node['mesh']} have different "
@@ -243,6 +296,20 @@ class _Document(Accessors):
                 if c.shape[0] != len(pos) or c.shape[1] not in (3, 4):
                     raise InputError(f"{self.name}: COLOR_0 of mesh {mesh_index} does not match its vertices.")
                 colors = np.clip(c[:, :3], 0, 1).astype(np.float32)
+            joints = weights = None
+            n_sets = sum(1 for n in range(len(attrs)) if f"JOINTS_{n}" in attrs)
+            if n_sets:
+                if any(f"WEIGHTS_{n}" not in attrs or f"JOINTS_{n}" not in attrs for n in range(n_sets)):
+                    raise InputError(f"{self.name}: mesh {mesh_index} has JOINTS_n without matching WEIGHTS_n; "
+                                     "re-export the skin.")
+                for n in range(n_sets):
+                    if self.item("accessors", attrs[f"JOINTS_{n}"]).get("componentType") not in (5121, 5123):
+                        raise InputError(f"{self.name}: JOINTS_{n} of mesh {mesh_index} is not unsigned bytes or "
+                                         "shorts; re-export the skin.")
+                joints, weights = influences([self.accessor(attrs[f"JOINTS_{n}"], normalize=False)
+                                              for n in range(n_sets)],
+                                             [self.accessor(attrs[f"WEIGHTS_{n}"]) for n in range(n_sets)],
+                                             len(pos), self.name, mesh_index)
             used = np.unique(tris)
             if len(used) < len(pos):
                 # Primitives often share one vertex buffer per mesh: keep only this one's vertices.
@@ -250,8 +317,10 @@ class _Document(Accessors):
                 remap[used] = np.arange(len(used))
                 pos, deltas, tris = pos[used], deltas[:, used], remap[tris]
                 colors = None if colors is None else colors[used]
+                if joints is not None:
+                    joints, weights = joints[used], weights[used]
             out.append({"positions": pos, "faces": tris, "deltas": deltas, "colors": colors,
-                        "material": p.get("material")})
+                        "material": p.get("material"), "joints": joints, "weights": weights})
         cache[mesh_index] = out
         return out
 
