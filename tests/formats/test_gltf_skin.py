@@ -75,7 +75,7 @@ def two_joint_strip(influence_sets: int = 1, morph: bool = False) -> tuple[GltfB
 
 
 def expected_strip(deg: float, lift: float = 0.0, dz: float = 0.0) -> np.ndarray:
-    """By hand: joint1 turned deg about z at (0, 1); a vertex with joint-1 weight w goes to (1-w) v + w (p + R (v - p))."""
+    """By hand: joint1 turned deg about z at (0, 1); weight w on it takes v to (1-w) v + w (p + R (v - p))."""
     c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
     out = []
     for (x, y, _), w in zip(STRIP, ON_JOINT1):

@@ -112,19 +112,19 @@ class Container:
         self._buffers[index] = data
         return data
 
-    def _external(self, uri: str, index: int) -> bytes:
-        """An external buffer file, refused when its path leaves base_dir."""
+    def _external(self, uri: str, index: int, kind: str = "buffer") -> bytes:
+        """An external buffer (or image) file, refused when its path leaves base_dir."""
         rel = unquote(uri)
         if "://" in rel or rel.startswith(("/", "\\")) or (len(rel) > 1 and rel[1] == ":"):
-            raise InputError(f"{self.name}: buffer {index} points to {uri!r}; only files next to the glTF are read.")
+            raise InputError(f"{self.name}: {kind} {index} points to {uri!r}; only files next to the glTF are read.")
         root = self.base_dir.resolve()
         path = (root / rel).resolve()
         if not path.is_relative_to(root):
-            raise InputError(f"{self.name}: buffer {index} points outside the glTF's folder ({uri!r}); refusing it.")
+            raise InputError(f"{self.name}: {kind} {index} points outside the glTF's folder ({uri!r}); refusing it.")
         try:
             return path.read_bytes()
         except OSError:
-            raise InputError(f"{self.name}: external buffer {uri!r} is missing; put it next to the .gltf.") from None
+            raise InputError(f"{self.name}: external {kind} {uri!r} is missing; put it next to the .gltf.") from None
 
     def view(self, index: int) -> memoryview:
         """The bytes of buffer view index, meshopt-decoded when compressed."""

@@ -8,6 +8,8 @@ Texture and material extensions are ignored (we draw flat base colours).
 
 from __future__ import annotations
 
+import base64
+import binascii
 import math
 import struct
 from pathlib import Path
@@ -21,6 +23,7 @@ from converter.formats.gltf.clips import Tracks, choose, clip_label, summaries
 from converter.formats.gltf.container import parse_container
 from converter.formats.gltf.sampling import keyframe_rate, sample, trs_matrices
 from converter.formats.gltf.skin import check_joint_indices, influences, joint_matrices, skin_positions
+from converter.formats.gltf.textures import decode_image, sample_texture
 from converter.formats.parts import collect_parts, part_name
 
 DEFAULT_FPS = 30.0
@@ -55,6 +58,8 @@ class _Document(Accessors):
         super().__init__(doc, bin_chunk, base_dir, name)
         self._prims: dict[int, list[dict]] = {}
         self._parents: dict[int, int] | None = None
+        self._images: dict[int, np.ndarray | None] = {}
+        self.notes: list[str] = []  # for Report.warnings: what the loader could not honour
 
     def scene_nodes(self) -> list[tuple[int, int]]:
         """(node, parent or -1) for every node of the default scene, parents first."""
@@ -114,12 +119,14 @@ class _Document(Accessors):
                 faces.append(p["faces"] + offset)
                 material = self.item("materials", p["material"]) if p["material"] is not None else {}
                 keys.append((part_name(material.get("name"), mesh.get("name"), node.get("name")),
-                             self.base_color(material)))
+                             self.base_color(material, textured=p["texture_colors"] is not None)))
                 key_of_face.append(np.full(len(p["faces"]), len(keys) - 1, np.int32))
-                colors.append(np.ones((len(p["positions"]), 3), np.float32) if p["colors"] is None else p["colors"])
+                own = p["colors"] if p["colors"] is not None else p["texture_colors"]  # vertex colours win
+                colors.append(np.ones((len(p["positions"]), 3), np.float32) if own is None else own)
                 offset += len(p["positions"])
         parts, part_of_key = collect_parts(keys)
-        has_colors = any(p["colors"] is not None for *_, prims in instances for p in prims)
+        has_colors = any(p["colors"] is not None or p["texture_colors"] is not None
+                         for *_, prims in instances for p in prims)
         flat = [j for take in chosen for j in take]
         extras = {
             "morph_targets": morph_names if morph_names else morph_count,
@@ -133,8 +140,8 @@ class _Document(Accessors):
                           " + ".join(clip_label(j, clip_names[j]) for j in flat) or None),
             "animations": summaries(clips, clip_names, self.node_label),
         }
-        if notes:
-            extras["warnings"] = notes
+        if notes or self.notes:
+            extras["warnings"] = notes + self.notes
         return FaceAnimation(
             frames=frames,
             faces=np.concatenate(faces).astype(np.int32),
@@ -245,17 +252,18 @@ class _Document(Accessors):
         """A node's name, or node<index>."""
         return str(self.item("nodes", index).get("name") or f"node{index}")
 
-    def base_color(self, material: dict) -> tuple[float, float, float] | None:
-        """The material's baseColorFactor rgb, or None to use the part's default colour."""
+    def base_color(self, material: dict, textured: bool = False) -> tuple[float, float, float] | None:
+        """The material's baseColorFactor rgb (white under a sampled texture), or None for the part's default."""
         pbr = material.get("pbrMetallicRoughness") or {}
         factor = pbr.get("baseColorFactor")
         if factor is None:
-            return None  # untextured default white would be meaningless for a face: use the part's colour
+            # untextured default white would be meaningless for a face: use the part's colour
+            return (1.0, 1.0, 1.0) if textured else None
         rgb = tuple(float(np.clip(c, 0.0, 1.0)) for c in list(factor)[:3])
         if len(rgb) != 3:
             raise InputError(f"{self.name}: a material's baseColorFactor needs 4 numbers.")
-        if pbr.get("baseColorTexture") is not None and rgb == (1.0, 1.0, 1.0):
-            return None  # the colour lives in a texture we do not sample
+        if pbr.get("baseColorTexture") is not None and rgb == (1.0, 1.0, 1.0) and not textured:
+            return None  # the colour lives in a texture we could not sample
         return rgb  # type: ignore[return-value]
 
     def primitives(self, mesh_index: int) -> list[dict]:
@@ -310,6 +318,8 @@ class _Document(Accessors):
                                               for n in range(n_sets)],
                                              [self.accessor(attrs[f"WEIGHTS_{n}"]) for n in range(n_sets)],
                                              len(pos), self.name, mesh_index)
+            material = self.item("materials", p["material"]) if p.get("material") is not None else {}
+            texture_colors = self.texture_colors(material, attrs, len(pos), mesh_index)
             used = np.unique(tris)
             if len(used) < len(pos):
                 # Primitives often share one vertex buffer per mesh: keep only this one's vertices.
@@ -317,12 +327,65 @@ class _Document(Accessors):
                 remap[used] = np.arange(len(used))
                 pos, deltas, tris = pos[used], deltas[:, used], remap[tris]
                 colors = None if colors is None else colors[used]
+                texture_colors = None if texture_colors is None else texture_colors[used]
                 if joints is not None:
                     joints, weights = joints[used], weights[used]
             out.append({"positions": pos, "faces": tris, "deltas": deltas, "colors": colors,
-                        "material": p.get("material"), "joints": joints, "weights": weights})
+                        "texture_colors": texture_colors, "material": p.get("material"), "joints": joints,
+                        "weights": weights})
         cache[mesh_index] = out
         return out
+
+    def texture_colors(self, material: dict, attrs: dict, n_vertices: int, mesh_index: int) -> np.ndarray | None:
+        """(V, 3) base-colour texture sampled at the vertices' UVs, or None (no texture, or one we cannot read)."""
+        info = (material.get("pbrMetallicRoughness") or {}).get("baseColorTexture")
+        if not isinstance(info, dict) or info.get("index") is None:
+            return None
+        texture = self.item("textures", info["index"])
+        uv_key = f"TEXCOORD_{int(info.get('texCoord', 0))}"
+        if attrs.get(uv_key) is None:
+            self._note(f"{self.name}: mesh {mesh_index} has a base-colour texture but no {uv_key}; "
+                       "drawing its material's base colour instead.")
+            return None
+        # Extensions (KHR_texture_basisu, EXT_texture_webp, ...) name alternative sources: take any Pillow decodes.
+        sources = [texture.get("source")] + [e.get("source") for e in (texture.get("extensions") or {}).values()
+                                              if isinstance(e, dict)]
+        pixels = next((px for px in (self.image(i) for i in sources if i is not None) if px is not None), None)
+        if pixels is None:
+            kinds = sorted({str(self.item("images", i).get("mimeType") or "unknown type")
+                            for i in sources if i is not None})
+            self._note(f"{self.name}: texture {info['index']} ({', '.join(kinds) or 'no image'}) cannot be decoded "
+                       "(Pillow reads PNG, JPEG, WebP); drawing its material's base colour instead.")
+            return None
+        uv = self.accessor(attrs[uv_key])
+        if uv.shape != (n_vertices, 2):
+            raise InputError(f"{self.name}: {uv_key} of mesh {mesh_index} does not match its vertices.")
+        sampler = self.item("samplers", texture["sampler"]) if texture.get("sampler") is not None else {}
+        return sample_texture(pixels, uv, sampler.get("wrapS", 10497), sampler.get("wrapT", 10497))
+
+    def image(self, index: int) -> np.ndarray | None:
+        """Decoded pixels of image index (cached), or None when missing or in a format Pillow cannot read."""
+        if index not in self._images:
+            image = self.item("images", index)
+            uri = image.get("uri")
+            try:
+                if image.get("bufferView") is not None:
+                    data = bytes(self.view(image["bufferView"]))
+                elif isinstance(uri, str) and uri.startswith("data:"):
+                    data = base64.b64decode(uri.partition(",")[2], validate=True)
+                elif isinstance(uri, str):
+                    data = self._external(uri, index, "image")
+                else:
+                    data = b""
+            except (InputError, binascii.Error, ValueError) as exc:
+                self._note(str(exc).rstrip(".") + "; drawing the base colour instead.")
+                data = b""
+            self._images[index] = decode_image(data) if data else None
+        return self._images[index]
+
+    def _note(self, message: str) -> None:
+        if message not in self.notes:
+            self.notes.append(message)
 
     def clip(self, index: int) -> Tracks:
         """Animation index's channels: (node, path) -> (times, values (keys, C), interpolation)."""
