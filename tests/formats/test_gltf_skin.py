@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 from converter.export.gltf_builder import ARRAY_BUFFER, GltfBuilder
 from converter.formats import load
 from converter.formats.gltf import load_gltf, parse_container
-from tests.formats.helpers import add_track, skinned_triangle
+from tests.formats.helpers import TRI, add_track, skinned_triangle
 
 HERE = Path(".")
 # A 1 x 2 strip: bottom pair on joint 0, middle pair half and half, top pair on joint 1 (which sits at y = 1).
@@ -171,3 +171,12 @@ def test_fox_every_clip_selectable_with_sane_bounds_and_motion(shared_data):
     low = frames["Walk"][0, :, 1] < 5
     spread = frames["Walk"][:, low, 2].max(1) - frames["Walk"][:, low, 2].min(1)
     assert spread.max() - spread.min() > 5
+
+
+def test_joints_outside_the_scene_tree_still_pose_the_skin():
+    b, node, joints = skinned_triangle(n_joints=2, weights=[[0, 1, 0, 0]] * 3, joints=[[0, 1, 0, 0]] * 3)
+    b.doc["nodes"][joints[0]]["translation"] = [0, 0, 4]  # the root joint of a chain that no scene lists
+    b.doc["nodes"][joints[1]]["translation"] = [1, 0, 0]
+    b.doc["scenes"][0]["nodes"] = [node]
+    anim = load_gltf(b.glb(), HERE, None, "tri")
+    np.testing.assert_allclose(anim.frames[0], TRI + [1, 0, 4], atol=1e-6)
