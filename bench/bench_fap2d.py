@@ -30,7 +30,7 @@ TARGET_2D_TRIANGLES = 1000
 def ict_face():
     """The ICT head as a one-frame FaceAnimation, its FDP and the engine's deformation."""
     from converter.animation import FaceAnimation
-    from converter.formats.ictfacekit import load_ict_head
+    from samples.ictfacekit import load_ict_head
     from converter.mpeg4 import fat2d
     from converter.mpeg4.fdp import load_fdp
 
@@ -40,7 +40,7 @@ def ict_face():
     if path.is_file():
         fdp = load_fdp(path, head.vertices)
     else:  # the engine's own ICT rules, until the sample FDP is written
-        from converter.mpeg4.facepoints import ict_fdp
+        from samples.ict_fdp import ict_fdp
 
         fdp = ict_fdp(ICT)
     neutral = head.vertices.astype(np.float64)

@@ -33,8 +33,8 @@ def _timed(fn, repeats: int, cpu: list | None = None) -> list[float]:
 
 def _ict():
     from converter.animation import FaceAnimation
-    from converter.formats.ictfacekit import load_ict_head
-    from converter.mpeg4.facepoints import ict_fdp
+    from samples.ictfacekit import load_ict_head
+    from samples.ict_fdp import ict_fdp
 
     head = load_ict_head(DATA / "ict_facekit")
     face = FaceAnimation(head.vertices[None], head.faces, head.part_ids, head.parts, 25.0, "ict")

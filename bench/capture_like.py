@@ -7,7 +7,7 @@
 What is in it (every random draw comes from one numpy Generator seeded with ``seed``):
 
 - Geometry: the ICT FaceKit face region (skin, mouth interior, teeth, lashes, both eyeballs with irises,
-  ``converter.formats.ict_region.face_region``) simplified with meshoptimizer to ~8,000 triangles.
+  ``samples.ict_region.face_region``) simplified with meshoptimizer to ~8,000 triangles.
 - Expression: 12 ICT expression shapes (delta = shape - neutral). Brows, smiles, cheeks, pucker/funnel follow
   slow band-limited random curves; the jaw "talks" (3-5 Hz open/close under a speaking envelope); both eyes
   blink every 2-5 s (a 9-frame pulse).
@@ -36,8 +36,8 @@ if str(ROOT) not in sys.path:
 
 from bench.faces import HEAD_PIVOT, ict_head  # noqa: E402
 from converter.animation import FaceAnimation  # noqa: E402
-from converter.formats.ict_region import face_region, sphere_center  # noqa: E402
-from converter.formats.ictfacekit import PART_ORDER  # noqa: E402
+from samples.ict_region import face_region, sphere_center  # noqa: E402
+from samples.ictfacekit import PART_ORDER  # noqa: E402
 
 FRAMES = 335
 FPS = 30.0

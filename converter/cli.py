@@ -83,7 +83,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 def cmd_info(args: argparse.Namespace) -> int:
     """facesvg info INPUT."""
-    anim = formats.load(args.input, cache=args.cache)
+    anim = formats.load(args.input, cache=args.cache, animation=args.animation)
     info = {
         "name": anim.name,
         "frames": anim.n_frames,
@@ -98,6 +98,11 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(json.dumps(info, indent=2, sort_keys=True))
     else:
         for k, v in info.items():
+            if k == "animations":  # one line per clip
+                for clip in v:
+                    print(f"{'animation':>16}: {clip['index']} {clip['name'] or '(unnamed)'}: {clip['duration']} s, "
+                          f"{clip['channels']} channels, targets {', '.join(clip['targets']) or 'none'}")
+                continue
             print(f"{k:>16}: {v}")
     return 0
 
@@ -120,6 +125,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("info", help="describe an input animation")
     p.add_argument("input")
     p.add_argument("--cache", help="PC2 or MDD point cache for an OBJ input")
+    p.add_argument("--animation", help="glTF animation to describe: NAME, INDEX or all (default: the first take)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_info)
 

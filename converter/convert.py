@@ -30,8 +30,8 @@ class Result:
 
 
 def load(path: str | Path, options: ConversionOptions, cache: str | Path | None = None) -> FaceAnimation:
-    """Read the input file named by path (plus an optional point cache) with the options' fps."""
-    return formats.load(path, fps=options.fps, cache=cache)
+    """Read the input file named by path (plus an optional point cache) with the options' fps and animation."""
+    return formats.load(path, fps=options.fps, cache=cache, animation=options.animation)
 
 
 def prepare(anim: FaceAnimation, options: ConversionOptions, report: Report, progress: Progress = no_progress) -> FaceAnimation:
@@ -94,6 +94,7 @@ def convert_animation(
     """Convert an in-memory FaceAnimation with the options; the library's main entry point."""
     kind: OutputKind = output_kind(options.to)
     report = Report()
+    report.warnings.extend(anim.extras.get("warnings", ()))  # the loader's notes (e.g. glTF clips not played)
     anim = prepare(anim, options, report, progress)
     if on_prepared is not None:  # callers that also need the 3D animation (the web UI's prerender)
         on_prepared(anim)

@@ -86,6 +86,9 @@ class ConversionOptions:
                                minimum=0, unset="animate", advanced=True)
     fps: float | None = option(None, "resample to this frame rate", label="Frames per second", minimum=0,
                                exclusive_minimum=True, maximum=240, unset="the source's rate, else 30")
+    animation: str | None = option(None, "glTF animation to play: a clip's NAME or INDEX, or all",
+                                   label="Animation", unset="the first take (clips that play together) or clip",
+                                   advanced=True)
     size: int = option(512, "output viewport in pixels (square)", label="Size (px)", minimum=16, maximum=8192,
                        unit="px")
     yaw: float = option(0.0, "camera degrees around the vertical axis, 0 = front", label="Camera yaw (°)",

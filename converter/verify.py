@@ -412,7 +412,7 @@ def verify_file(svg_path: str | Path, input_path: str | Path, cache: str | Path 
     meta = metadata_of(read_svg(data))
     opts = meta.get("options", {})
     options = ConversionOptions.from_mapping({k: v for k, v in opts.items() if not isinstance(v, (dict, list))})
-    anim = formats.load(input_path, fps=options.fps, cache=cache)
+    anim = formats.load(input_path, fps=options.fps, cache=cache, animation=options.animation)
     anim = prepare(anim, options, Report())
     return verify_animation(data, anim, tolerance)
 

@@ -3,7 +3,7 @@
     .venv/bin/python samples/make_fdp.py [SHARED_DATA_FOLDER]   (default ../shared/data)
 
 ict.fdp.json: the ICT FaceKit neutral head's 68 Multi-PIE landmark vertex ids mapped to MPEG-4 feature points,
-the rest by geometric rules, parts from the FaceKit README's vertex ranges (converter.mpeg4.facepoints.ict_fdp).
+the rest by geometric rules, parts from the FaceKit README's vertex ranges (samples/ict_fdp.py).
 mediapipe.fdp.json: the MediaPipe canonical face with irises (478 vertices), from known vertex ids.
 face.fdp.json: the ICT FDP mapped onto samples/face.glb (same ICT coordinates, decimated) by nearest vertices.
 Deterministic.
@@ -18,9 +18,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from converter import formats  # noqa: E402
-from converter.formats.ictfacekit import load_ict_head  # noqa: E402
-from converter.mpeg4.facepoints import ict_fdp, mediapipe_fdp, transfer_fdp  # noqa: E402
+from converter.mpeg4.facepoints import mediapipe_fdp, transfer_fdp  # noqa: E402
 from converter.mpeg4.fdp import save_fdp  # noqa: E402
+from samples.ict_fdp import ict_fdp  # noqa: E402
+from samples.ictfacekit import load_ict_head  # noqa: E402
 
 
 def main(data: Path) -> None:

@@ -9,7 +9,7 @@ from pathlib import Path
 from converter import formats
 from converter.cloning import clone
 from converter.errors import InputError
-from converter.formats.gltf_write import write_glb
+from converter.export.glb import write_glb
 from converter.userfiles import check_output, write_atomic
 
 

@@ -28,14 +28,15 @@ def sniff(data: bytes) -> str:
     raise InputError("the input is not a glTF/GLB file, a zip of OBJ frames, or an OBJ mesh; check the file.")
 
 
-def load(path: str | Path, fps: float | None = None, cache: str | Path | None = None) -> FaceAnimation:
-    """Read any supported input file into a FaceAnimation (resampled to fps when given)."""
-    anim = _load(Path(path), fps, cache)
+def load(path: str | Path, fps: float | None = None, cache: str | Path | None = None,
+         animation: str | None = None) -> FaceAnimation:
+    """Read any supported input file into a FaceAnimation (resampled to fps; animation picks a glTF clip)."""
+    anim = _load(Path(path), fps, cache, animation)
     anim.extras.setdefault("source_path", str(path))  # lets 3D stages find side files such as NAME.fdp.json
     return anim
 
 
-def _load(path: Path, fps: float | None, cache: str | Path | None) -> FaceAnimation:
+def _load(path: Path, fps: float | None, cache: str | Path | None, animation: str | None) -> FaceAnimation:
     data = read_bytes(path)
     if not data:
         raise InputError(f"{path.name} is empty.")
@@ -44,7 +45,9 @@ def _load(path: Path, fps: float | None, cache: str | Path | None) -> FaceAnimat
     if kind in ("glb", "gltf"):
         from converter.formats import gltf
 
-        return gltf.load_gltf(data, base_dir=path.parent, fps=fps, name=name)
+        return gltf.load_gltf(data, base_dir=path.parent, fps=fps, name=name, animation=animation)
+    if animation is not None:
+        raise InputError(f"--animation picks a glTF animation, and {path.name} is not glTF; leave it out.")
     if kind == "zip":
         from converter.formats import objseq
 

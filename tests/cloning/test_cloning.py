@@ -206,7 +206,7 @@ def test_degenerate_correspondences():
 def test_cli_clone_writes_glb(data, tmp_path):
     from converter import formats
     from converter.cli import main
-    from converter.formats.gltf_write import write_glb
+    from converter.export.glb import write_glb
 
     src = data["src"].sliced(0, 6)
     (tmp_path / "src.glb").write_bytes(write_glb(src))

@@ -11,7 +11,7 @@ import sys
 
 import numpy as np
 
-from converter.formats.gltf_build import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder
+from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder
 
 
 def scene() -> bytes:

@@ -12,7 +12,7 @@ import pytest
 from converter.errors import InputError
 from converter.formats import load
 from converter.formats.gltf import _Document, load_gltf, parse_container
-from converter.formats.gltf_build import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder, encode_filter
+from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder, encode_filter
 from tests.formats.helpers import TRI, add_track, triangle_scene
 
 HERE = Path(".")

@@ -12,8 +12,8 @@ import pytest
 from converter.errors import InputError
 from converter.formats import load
 from converter.formats.gltf import load_gltf
-from converter.formats.gltf_build import ARRAY_BUFFER, GltfBuilder
-from tests.formats.helpers import add_track, triangle_scene
+from converter.export.gltf_builder import ARRAY_BUFFER, GltfBuilder
+from tests.formats.helpers import add_track, skinned_triangle, triangle_scene
 
 HERE = Path(".")
 
@@ -69,11 +69,34 @@ def test_unsupported_required_extension_is_named():
     raises(with_doc(lambda b, n: b.use_extension("KHR_draco_mesh_compression")), "KHR_draco_mesh_compression")
 
 
-def test_skinned_mesh_is_refused_clearly():
-    def skin(b, n):
-        joint = b.add("nodes", {"name": "jaw"})
-        b.doc["nodes"][n]["skin"] = b.add("skins", {"joints": [joint]})
-    raises(with_doc(skin), "skinned meshes are not supported yet; bake the skin to morph targets or a point cache")
+def skin_case(change=None, **kwargs) -> bytes:
+    b, node, joints = skinned_triangle(**kwargs)
+    if change is not None:
+        change(b, node, joints)
+    return b.glb()
+
+
+def attrs(b, node):
+    return b.doc["meshes"][b.doc["nodes"][node]["mesh"]]["primitives"][0]["attributes"]
+
+
+@pytest.mark.parametrize("data,match", [
+    (lambda: skin_case(joints=[[5, 0, 0, 0]] * 3), "vertex 0 of node body is weighted to joint 5, but its skin has 1"),
+    (lambda: skin_case(lambda b, n, j: attrs(b, n).update(WEIGHTS_0=b.accessor(np.float32([[1, 0, 0, 0]] * 2)))),
+     "JOINTS_0/WEIGHTS_0 of mesh 0 do not hold 4 values for each of its 3 vertices"),
+    (lambda: skin_case(lambda b, n, j: attrs(b, n).update(JOINTS_0=b.accessor(np.float32([[0, 0]] * 3)))),
+     "JOINTS_0 of mesh 0 is not unsigned bytes or shorts"),
+    (lambda: skin_case(lambda b, n, j: attrs(b, n).pop("WEIGHTS_0")), "JOINTS_n without matching WEIGHTS_n"),
+    (lambda: skin_case(lambda b, n, j: [attrs(b, n).pop(k) for k in ("JOINTS_0", "WEIGHTS_0")]),
+     "node body has a skin but its mesh has no JOINTS_0/WEIGHTS_0"),
+    (lambda: skin_case(lambda b, n, j: b.doc["skins"][0].update(joints=[])), "skin 0 has no joints"),
+    (lambda: skin_case(lambda b, n, j: b.doc["skins"][0].update(joints=[99])), "node 99 does not exist"),
+    (lambda: skin_case(lambda b, n, j: b.doc["nodes"][n].update(skin=3)), "skin 3 does not exist"),
+    (lambda: skin_case(n_joints=2, inverse_bind=np.eye(4)[None]), "1 inverse bind matrices for 2 joints"),
+    (lambda: skin_case(weights=[[-1, 0, 0, 0]] * 3), "negative or non-finite skin weights"),
+])
+def test_bad_skins_give_one_input_error(data, match):
+    raises(data(), match)
 
 
 def test_nan_positions():

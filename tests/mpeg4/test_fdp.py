@@ -117,8 +117,8 @@ def _mirror_ok(fdp: Fdp, v: np.ndarray, tol: float) -> None:
 
 
 def test_ict_fdp_matches_bundled_and_is_sane(shared_data):
-    from converter.formats.ictfacekit import load_ict_head
-    from converter.mpeg4.facepoints import ict_fdp
+    from samples.ictfacekit import load_ict_head
+    from samples.ict_fdp import ict_fdp
 
     fdp = ict_fdp(shared_data / "ict_facekit")
     assert fdp_to_json(fdp) == (ROOT / "samples" / "ict.fdp.json").read_text()  # regenerate with samples/make_fdp.py

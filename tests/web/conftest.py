@@ -21,7 +21,7 @@ SMALL = {"size": "64", "occlusion": "0"}  # keeps conversions in tests fast
 def glb_bytes(n_keys: int = 4, fps: float = 10.0) -> bytes:
     """A cube whose top face rises over n_keys frames, written by the product's own glTF writer."""
     from converter.animation import FaceAnimation
-    from converter.formats.gltf_write import write_glb
+    from converter.export.glb import write_glb
 
     cube = cube_animation(1)
     pos = cube.frames[0]

@@ -1,4 +1,7 @@
-"""The ICT FaceKit head (MIT): neutral mesh, parts by material, expression shapes as deltas, landmarks."""
+"""The ICT FaceKit head (MIT): neutral mesh, parts by material, expression shapes as deltas, landmarks.
+
+Dataset tooling, not part of the library: samples/make_sample.py, samples/make_fdp.py, bench and tests read it.
+"""
 
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from converter.animation import FaceAnimation
-from converter.formats.gltf_build import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder
+from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder
 
 
 def write_glb(anim: FaceAnimation) -> bytes:

@@ -1,6 +1,6 @@
 """GltfBuilder: assemble a glTF 2.0 asset from numpy arrays, optionally meshopt-compressed (EXT_meshopt_compression).
 
-Used by samples/make_sample.py and the format tests; byte-for-byte deterministic.
+Used by the GLB writer (converter/export/glb.py), samples/make_sample.py and the format tests; deterministic.
 """
 
 from __future__ import annotations

@@ -1,0 +1,75 @@
+"""Playback in Chromium (issue 18): frames per second under CPU throttling, as a document and as <img>.
+
+Files: the bundled sample (default, Gouraud, mobile preset) and the capture-like face (default, mobile preset).
+Each is opened from a loopback server as a document and inside an <img>, at 1x, 4x and 6x CPU throttling
+(DevTools Emulation.setCPUThrottlingRate: 4x and 6x stand in for a mid-range and a low-end phone).
+"""
+
+from __future__ import annotations
+
+import gzip
+import re
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from bench.capture_like import capture_like  # noqa: E402 - after the path setup above
+from bench.playback import chromium, host_page, measure, serve  # noqa: E402
+from converter.convert import convert, convert_animation  # noqa: E402
+from converter.options import ConversionOptions  # noqa: E402
+
+TITLE = "Playback in Chromium under CPU throttling (issue 18)"
+SAMPLE = ROOT / "samples" / "face.glb"
+THROTTLES = (1, 4, 6)
+SECONDS = 5.0
+MOBILE = {"max_triangles": 1500, "size": 256}
+
+
+def outputs() -> list[tuple[str, bytes, int]]:
+    """(label, svg bytes, viewport px) for every file measured."""
+    out = []
+    for label, opts in (("sample, default", {}), ("sample, gouraud", {"shading": "gouraud"}),
+                        ("sample, mobile preset", MOBILE)):
+        options = ConversionOptions(**opts)
+        out.append((label, convert(SAMPLE, options).data, options.size))
+    anim = capture_like()
+    for label, opts in (("capture-like, default", {}), ("capture-like, mobile preset", MOBILE)):
+        options = ConversionOptions(**opts)
+        out.append((label, convert_animation(anim, options).data, options.size))
+    return out
+
+
+def run() -> str:
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        files = outputs()
+        for i, (_, data, size) in enumerate(files):
+            (folder / f"f{i}.svg").write_bytes(data)
+            (folder / f"f{i}.html").write_text(host_page(f"f{i}.svg", size))
+        with serve(folder) as base, chromium() as browser:
+            for i, (label, data, size) in enumerate(files):
+                paths = len(re.findall(rb"<path", data))
+                for mode, url in (("document", f"{base}/f{i}.svg"), ("<img>", f"{base}/f{i}.html")):
+                    cells = [measure(browser, url, size, rate, SECONDS) for rate in THROTTLES]
+                    rows.append(
+                        f"| {label} | {paths:,} | {len(data) / 1024:,.0f} / {len(gzip.compress(data, 9, mtime=0)) / 1024:,.0f} "
+                        f"| {mode} | " + " / ".join(f"{c.fps_raf:.1f}" for c in cells)
+                        + " | " + " / ".join(f"{c.fps_changed:.1f}" for c in cells)
+                        + " | " + " / ".join(f"{c.main_ms:.0f}" for c in cells)
+                        + f" | {cells[0].first_frame_ms:,.0f} | {max(c.renderer_mb for c in cells):,.0f} |"
+                    )
+    head = (
+        f"Each cell: {SECONDS:.0f} s of playback after load, one run per throttling rate (1x / 4x / 6x). "
+        "fps rAF = requestAnimationFrame callbacks per second; fps changed = screencast frames whose pixels "
+        "changed per second (inside `<img>` the host page's rAF overstates playback); main ms = main-thread task "
+        "time per rAF frame (Performance.getMetrics TaskDuration); first frame = navigation start to the first "
+        "animation frame after load, at 1x; renderer MB = resident memory of the renderer processes.\n\n"
+        "| output | paths | KB / gzip KB | as | fps rAF 1x / 4x / 6x | fps changed | main ms/frame | first frame ms | renderer MB |\n"
+        "|---|---|---|---|---|---|---|---|---|\n"
+    )
+    return head + "\n".join(rows) + "\n"

@@ -1,0 +1,149 @@
+"""How an SVG plays in a real browser: Chromium's frame clock under CPU throttling (a phone stand-in).
+
+One measurement opens the file as a document or inside an `<img>`, throttles the renderer's CPU through the
+DevTools protocol, and reports frames per second by requestAnimationFrame, frames whose pixels changed (a
+screencast: inside `<img>` the host page's rAF overstates playback), main-thread milliseconds per frame
+(Performance.getMetrics TaskDuration), the time to the first frame, and the renderer's resident memory.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import http.server
+import threading
+import time
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator, NamedTuple
+
+from playwright.sync_api import Browser, sync_playwright
+
+from tests.conftest import CHROMIUM_ARGS, chromium_path
+
+
+class Playback(NamedTuple):
+    """What one file did in one mode at one throttling rate."""
+
+    fps_raf: float  # requestAnimationFrame callbacks per second
+    fps_changed: float  # screencast frames whose pixels changed, per second
+    main_ms: float  # main-thread task milliseconds per rAF frame
+    first_frame_ms: float  # navigation start to the first animation frame after load
+    renderer_mb: float  # resident memory of the renderer processes after the run
+
+
+@contextmanager
+def serve(folder: Path) -> Iterator[str]:
+    """A loopback HTTP server for one folder, for the length of the block; yields its base URL."""
+    handler = functools.partial(_QuietHandler, directory=str(folder))
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{server.server_address[1]}"
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+class _QuietHandler(http.server.SimpleHTTPRequestHandler):
+    def log_message(self, format: str, *args) -> None:  # noqa: A002 - the base class's signature
+        pass
+
+
+@contextmanager
+def chromium() -> Iterator[Browser]:
+    """Debian's Chromium, headless, driven by Playwright."""
+    exe = chromium_path()
+    if not exe:
+        raise RuntimeError("Chromium is not installed (apt-get install chromium)")
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS)
+        try:
+            yield browser
+        finally:
+            browser.close()
+
+
+_START_RAF = """() => { window.__fsv = {n: 0, t0: null, t1: null, run: true};
+  const c = window.__fsv;
+  function tick(t) { if (c.t0 === null) c.t0 = t; else { c.n++; c.t1 = t; } if (c.run) requestAnimationFrame(tick); }
+  requestAnimationFrame(tick); }"""
+_STOP_RAF = """() => { const c = window.__fsv; c.run = false; return {n: c.n, dt: (c.t1 ?? c.t0 ?? 0) - (c.t0 ?? 0)}; }"""
+
+_FIRST_FRAME = """() => new Promise((done) => requestAnimationFrame(() => done(performance.now())))"""
+
+
+def host_page(svg_name: str, size: int) -> str:
+    """An HTML page that shows the SVG as an image, the way a site embeds it."""
+    return (f"<!doctype html><html><body style='margin:0'><img src='{svg_name}' width='{size}' height='{size}'>"
+            "</body></html>")
+
+
+def measure(browser: Browser, url: str, size: int, throttle: float, seconds: float) -> Playback:
+    """Play the page at url for `seconds` under `throttle`x CPU slowdown and measure it."""
+    context = browser.new_context(viewport={"width": size, "height": size})
+    page = context.new_page()
+    cdp = context.new_cdp_session(page)
+    try:
+        cdp.send("Performance.enable")
+        cdp.send("Emulation.setCPUThrottlingRate", {"rate": throttle})
+        page.goto(url, wait_until="load", timeout=300_000)
+        first = float(page.evaluate(_FIRST_FRAME))
+        changed = [0, ""]  # frames whose image differs from the previous one, last digest
+        pending: list[int] = []  # screencast frames to acknowledge (never from inside the event handler)
+
+        def on_frame(event: dict) -> None:
+            digest = hashlib.sha1(event["data"].encode()).hexdigest()
+            changed[0] += digest != changed[1]
+            changed[1] = digest
+            pending.append(event["sessionId"])
+
+        cdp.on("Page.screencastFrame", on_frame)
+        before = _task_seconds(cdp)
+        cdp.send("Page.startScreencast", {"format": "jpeg", "quality": 40, "everyNthFrame": 1})
+        page.evaluate(_START_RAF)
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            page.wait_for_timeout(10)
+            while pending:
+                cdp.send("Page.screencastFrameAck", {"sessionId": pending.pop()})
+        raf = page.evaluate(_STOP_RAF)
+        cdp.send("Page.stopScreencast")
+        after = _task_seconds(cdp)
+        dt = max(raf["dt"], 1.0) / 1000.0
+        n = max(int(raf["n"]), 1)
+        return Playback(
+            fps_raf=raf["n"] / dt,
+            fps_changed=max(changed[0] - 1, 0) / dt,
+            main_ms=1000.0 * (after - before) / n,
+            first_frame_ms=first,
+            renderer_mb=renderer_rss_mb(browser),
+        )
+    finally:
+        context.close()
+
+
+def _task_seconds(cdp) -> float:
+    metrics = {m["name"]: m["value"] for m in cdp.send("Performance.getMetrics")["metrics"]}
+    return float(metrics.get("TaskDuration", 0.0))
+
+
+def renderer_rss_mb(browser: Browser) -> float:
+    """Resident memory of the browser's renderer processes (MiB), read from /proc by their pids."""
+    session = browser.new_browser_cdp_session()
+    try:
+        info = session.send("SystemInfo.getProcessInfo")["processInfo"]
+    finally:
+        session.detach()
+    total = 0
+    for proc in info:
+        if proc.get("type") != "renderer":
+            continue
+        try:
+            for line in Path(f"/proc/{proc['id']}/status").read_text().splitlines():
+                if line.startswith("VmRSS:"):
+                    total += int(line.split()[1])
+        except OSError:
+            continue
+    return total / 1024.0

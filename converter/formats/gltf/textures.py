@@ -1,0 +1,59 @@
+"""Base-colour textures sampled at the vertices: images decoded with Pillow, bilinear lookups with scipy.ndimage.
+
+The sampled colours are the texture's own (sRGB) values, the way a viewer shows an unlit textured surface; they
+become the primitive's vertex colours, so the flat and Gouraud outputs keep eyes, brows and lips painted in a
+texture. KHR_texture_transform is not applied.
+"""
+
+from __future__ import annotations
+
+import io
+import warnings
+
+import numpy as np
+from PIL import Image, UnidentifiedImageError
+from scipy import ndimage
+
+MAX_TEXTURE_PIXELS = 1 << 26  # a 8192 x 8192 texture; larger ones are not decoded
+# glTF sampler wrap modes -> scipy.ndimage boundary modes (REPEAT is the default).
+WRAP_MODES = {33071: "nearest", 33648: "grid-mirror", 10497: "grid-wrap"}
+
+
+def decode_image(data: bytes) -> np.ndarray | None:
+    """(H, W, 3) uint8 pixels of a PNG/JPEG/WebP/... image, or None when Pillow cannot decode it (e.g. KTX2)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            with Image.open(io.BytesIO(data)) as image:
+                if image.width * image.height > MAX_TEXTURE_PIXELS:
+                    return None
+                return np.asarray(image.convert("RGB"))
+    except (UnidentifiedImageError, OSError, ValueError, SyntaxError, Image.DecompressionBombError,
+            Image.DecompressionBombWarning):
+        return None
+
+
+def sample_texture(pixels: np.ndarray, uv: np.ndarray, wrap_s: int = 10497, wrap_t: int = 10497) -> np.ndarray:
+    """(V, 3) float32 colours 0..1 of pixels (H, W, 3) at texture coordinates uv (V, 2), bilinear, glTF wrap modes."""
+    h, w = pixels.shape[:2]
+    # glTF UV (0, 0) is the image's top-left corner; pixel centres sit at half-integers.
+    x = uv[:, 0] * w - 0.5
+    y = uv[:, 1] * h - 0.5
+    mode_s, mode_t = WRAP_MODES.get(wrap_s, "grid-wrap"), WRAP_MODES.get(wrap_t, "grid-wrap")
+    mode = mode_s
+    if mode_s != mode_t:  # map_coordinates takes one mode: fold each axis into the image first
+        x, y, mode = _wrap(x, w, mode_s), _wrap(y, h, mode_t), "nearest"
+    out = np.empty((len(uv), 3), np.float32)
+    for c in range(3):
+        out[:, c] = ndimage.map_coordinates(pixels[..., c], [y, x], order=1, mode=mode, output=np.float32)
+    return np.clip(out / 255.0, 0.0, 1.0)
+
+
+def _wrap(coord: np.ndarray, size: int, mode: str) -> np.ndarray:
+    """Pixel coordinates folded into [-0.5, size - 0.5] as the wrap mode repeats, mirrors or clamps the image."""
+    if mode == "grid-wrap":
+        return np.mod(coord + 0.5, size) - 0.5
+    if mode == "grid-mirror":
+        period = np.mod(coord + 0.5, 2 * size)
+        return np.where(period < size, period, 2 * size - period) - 0.5
+    return np.clip(coord, 0.0, size - 1.0)
