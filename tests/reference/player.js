@@ -20,7 +20,8 @@ function pickClips(animations, clips) {
   });
 }
 
-// Every mesh drawn opaque with its own colour (factor and vertex colours, no texture) and side, flat Lambert.
+// Every mesh drawn opaque with its own colour (factor and vertex colours) and side, flat Lambert. No texture:
+// its alpha would leak into the mask alpha (OPAQUE materials must ignore it), and its colours are not compared.
 function restyle(scene) {
   scene.traverse((obj) => {
     obj.frustumCulled = false;  // skinned and morphed meshes leave their rest-pose bounds

@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import json
 import mimetypes
+import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +19,7 @@ from typing import Sequence
 
 import numpy as np
 from lxml import etree
+from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from converter.formats.gltf import parse_container
 from tests.svgrender import chromium_frames, iou
@@ -67,13 +69,15 @@ def spread_frames(n_frames: int, count: int = 5) -> list[int]:
     return sorted({int(round(x * (n_frames - 1))) for x in np.r_[0.0, inner, 1.0][:max(count, 1)]})
 
 
-def _fulfil(roots: dict[str, Path]):
+def _fulfil(roots: dict[str, Path], missing: list[str]):
     def handle(route) -> None:
         path = route.request.url[len(ORIGIN):].split("?", 1)[0]
         prefix, _, rest = path.lstrip("/").partition("/")
         base = roots.get(prefix)
-        target = (base / rest).resolve() if base else None
-        if target is None or not target.is_file() or base.resolve() not in target.parents:
+        # normpath, not resolve: node_modules may be a symlink; ".." still cannot climb out of the root
+        target = Path(os.path.normpath(base / rest)) if base else None
+        if target is None or base not in target.parents or not target.is_file():
+            missing.append(path)
             route.fulfill(status=404, body="not found")
             return
         kind = mimetypes.guess_type(target.name)[0] or "application/octet-stream"
@@ -95,11 +99,15 @@ def threejs_frames(browser, gltf: Path, meta: dict, frames: Sequence[int], clips
     gltf = Path(gltf).resolve()
     page = browser.new_page(viewport={"width": width, "height": height})
     errors: list[str] = []
+    missing_files: list[str] = []
     page.on("pageerror", lambda exc: errors.append(str(exc)))
     try:
-        page.route(f"{ORIGIN}/**", _fulfil({"ref": HERE, "data": gltf.parent}))
+        page.route(f"{ORIGIN}/**", _fulfil({"ref": HERE, "data": gltf.parent}, missing_files))
         page.goto(f"{ORIGIN}/ref/player.html")
-        page.wait_for_function("window.referencePlayer !== undefined", timeout=30000)
+        try:
+            page.wait_for_function("window.referencePlayer !== undefined", timeout=60000)
+        except PlaywrightTimeout:
+            raise RuntimeError(f"the reference page did not start (errors {errors}, not found {missing_files})") from None
         req = {"url": f"{ORIGIN}/data/{gltf.name}", "clips": clips if clips == "all" else list(clips),
                "view": cam["view"], "projection": cam["projection"], "viewport": [width, height],
                "times": frame_times(meta, frames), "linear": linear}
@@ -120,7 +128,10 @@ def svg_frames(browser, svg: bytes, frames: Sequence[int]) -> np.ndarray:
 
 
 def colours_comparable(gltf: Path) -> bool:
-    """True when every drawn primitive's colour is vertex colours or a baseColorFactor, with no texture."""
+    """True when every drawn primitive's colour is vertex colours or a baseColorFactor, with no texture.
+
+    (The player draws no textures; and we shade a texture's sRGB values in display space while three.js decodes
+    them to linear first, so no one output transform would make the numbers comparable.)"""
     doc, _ = parse_container(Path(gltf).read_bytes())
     materials = doc.get("materials") or []
     for mesh in doc.get("meshes") or []:
