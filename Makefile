@@ -8,6 +8,7 @@ export PYOPENGL_PLATFORM := egl
 .PHONY: setup run convert test golden bench clean
 
 setup: $(STAMP)
+	@if command -v npm >/dev/null 2>&1 && ! [ tests/reference/node_modules/.package-lock.json -nt tests/reference/package-lock.json ]; then cd tests/reference && npm ci --no-audit --no-fund --silent; fi
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)

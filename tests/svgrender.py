@@ -30,6 +30,23 @@ def chromium_frame(browser, svg: bytes, t: float, width: int, height: int, scale
     return np.asarray(Image.open(io.BytesIO(png)).convert("RGBA"))
 
 
+def chromium_frames(browser, svg: bytes, times: list[float], width: int, height: int) -> np.ndarray:
+    """RGBA uint8 (N, H, W, 4) of the SVG paused at each time, from one page (a large SVG is parsed once)."""
+    page = browser.new_page(viewport={"width": width, "height": height})
+    try:
+        page.set_content("<!doctype html><html><body style='margin:0;background:transparent'>"
+                         + svg.decode("utf-8") + "</body></html>")
+        out = []
+        for t in times:
+            page.evaluate("(t) => { const s = document.querySelector('svg'); s.pauseAnimations(); s.setCurrentTime(t); }", t)
+            page.wait_for_timeout(50)
+            png = page.locator("svg").screenshot(omit_background=True, animations="allow")
+            out.append(np.asarray(Image.open(io.BytesIO(png)).convert("RGBA")))
+    finally:
+        page.close()
+    return np.stack(out)
+
+
 def iou(a: np.ndarray, b: np.ndarray) -> float:
     """Intersection over union of two boolean masks."""
     union = np.logical_or(a, b).sum()
