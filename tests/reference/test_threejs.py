@@ -21,7 +21,7 @@ from conftest import ARTIFACTS, SAMPLE, SHARED_DATA
 from converter.convert import convert
 from converter.errors import InputError
 from converter.formats.gltf import parse_container
-from converter.formats.gltf_build import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder
+from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder
 from converter.options import ConversionOptions
 from tests.reference import threejs
 
