@@ -59,6 +59,7 @@ def add_conversion_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--smooth", type=float, help="temporal smoothing, Gaussian sigma in frames (default 0: off)")
     p.add_argument("--fap", help="MPEG-4 FAP stream that drives the input face")
     p.add_argument("--fdp", help="feature-point definition of the input face (JSON or Xface .fdp)")
+    p.add_argument("--weights", help="ARKit weight capture (Live Link Face CSV, weight JSON) driving the face's morph targets")
     p.add_argument("--clone-target", help="put the animation onto this face before converting")
     p.add_argument("--clone-method", default="dense", help="example | frames | dense")
     p.add_argument("--clone-keys", help="key-model pairs (zip) for --clone-method example")

@@ -30,11 +30,18 @@ class Result:
 
 def load(path: str | Path, options: ConversionOptions, cache: str | Path | None = None) -> FaceAnimation:
     """Read the input file named by path (plus an optional point cache) with the options' fps."""
+    if options.weights:  # the input is a face with named morph targets, animated by the capture
+        from converter.blendshapes import drive_file
+
+        return drive_file(path, options.weights, fps=options.fps)
     return formats.load(path, fps=options.fps, cache=cache)
 
 
 def prepare(anim: FaceAnimation, options: ConversionOptions, report: Report, progress: Progress = no_progress) -> FaceAnimation:
     """The optional 3D stages in order: FAP driving, frame range, cloning, triangle budget."""
+    if "weights" in anim.extras:  # what the weight capture matched, from load()
+        report.counts.update(anim.extras["weights"]["counts"])
+        report.warnings.extend(anim.extras["weights"]["warnings"])
     if options.fap and options.to != "fap2d":  # the fap2d package carries the stream itself
         from converter import mpeg4
 
@@ -118,7 +125,8 @@ def convert(path: str | Path, options: ConversionOptions, progress: Progress = n
     progress("load", 0.0)
     anim = load(path, options, cache)
     load_s = time.perf_counter() - t
-    result = convert_animation(anim, options, progress, source_sha256=file_sha256(path), on_prepared=on_prepared)
+    sha = file_sha256(path) if Path(path).is_file() else ""  # an ICT FaceKit folder has no one file to hash
+    result = convert_animation(anim, options, progress, source_sha256=sha, on_prepared=on_prepared)
     result.report.timings = {"load": load_s, **result.report.timings}
     return result
 

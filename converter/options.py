@@ -49,6 +49,7 @@ class ConversionOptions:
     clone_method: str = "dense"  # example | frames | dense
     clone_keys: str | None = None  # key-model pairs (zip) for example-based cloning
     correspondences: str | None = None  # user correspondences for dense cloning
+    weights: str | None = None  # blendshape weight capture (Live Link Face CSV, ARKit weight JSON) driving the face's morph targets
 
     def __post_init__(self) -> None:
         if self.to not in OUTPUT_KINDS:
