@@ -15,8 +15,9 @@ FILE_FIELDS = {
     "clone_target": "a face file to clone the animation onto",
     "clone_keys": "zip of key-model pairs for clone_method=example",
     "correspondences": "user correspondences for dense cloning",
+    "weights": "ARKit weight capture (Live Link Face CSV, weight JSON) driving the file's named morph targets",
 }
-SKIP = {"fap", "fdp", "clone_target", "clone_keys", "correspondences"}
+SKIP = {"fap", "fdp", "clone_target", "clone_keys", "correspondences", "weights"}
 
 
 def _option_schema() -> dict:

@@ -15,7 +15,7 @@ from webapp.jobstore import Job
 from webapp.storage import new_job_id
 from webapp.uploads import EXTRA_FIELDS, check_extra, check_main_input, stored_name
 
-FILE_OPTIONS = ("fap", "fdp", "clone_target", "clone_keys", "correspondences")
+FILE_OPTIONS = ("fap", "fdp", "clone_target", "clone_keys", "correspondences", "weights")
 OPTION_FIELDS = tuple(f.name for f in fields(ConversionOptions) if f.name not in FILE_OPTIONS)
 CONTROL_FIELDS = ("csrf_token", "sample", "file", *EXTRA_FIELDS)
 

@@ -12,7 +12,7 @@ from converter import formats
 from converter.errors import InputError
 
 # Extra files a job may carry besides the main input; each maps to the ConversionOptions field it fills.
-EXTRA_FIELDS = ("cache", "fap", "fdp", "clone_target", "clone_keys", "correspondences")
+EXTRA_FIELDS = ("cache", "fap", "fdp", "clone_target", "clone_keys", "correspondences", "weights")
 SUFFIX = re.compile(r"^\.[a-z0-9]{1,8}$")
 MAX_ZIP_ENTRIES = 20000
 MAX_ZIP_RATIO = 200  # uncompressed / compressed per entry; beyond this a zip is treated as a bomb
