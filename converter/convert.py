@@ -28,12 +28,13 @@ class Result:
     report: Report
 
 
-def load(path: str | Path, options: ConversionOptions, cache: str | Path | None = None) -> FaceAnimation:
+def load(path: str | Path, options: ConversionOptions, cache: str | Path | None = None,
+         progress: Progress = no_progress) -> FaceAnimation:
     """Read the input file named by path (plus an optional point cache) with the options' fps."""
     if options.weights:  # the input is a face with named morph targets, animated by the capture
         from converter.blendshapes import drive_file
 
-        return drive_file(path, options.weights, fps=options.fps)
+        return drive_file(path, options.weights, fps=options.fps, progress=lambda s, f: progress(s, 0.05 * f))
     return formats.load(path, fps=options.fps, cache=cache)
 
 
@@ -123,7 +124,7 @@ def convert(path: str | Path, options: ConversionOptions, progress: Progress = n
     """Convert an input file with the options: the whole pipeline, nothing written to disk."""
     t = time.perf_counter()
     progress("load", 0.0)
-    anim = load(path, options, cache)
+    anim = load(path, options, cache, progress)
     load_s = time.perf_counter() - t
     sha = file_sha256(path) if Path(path).is_file() else ""  # an ICT FaceKit folder has no one file to hash
     result = convert_animation(anim, options, progress, source_sha256=sha, on_prepared=on_prepared)

@@ -288,3 +288,16 @@ def test_cli_convert_with_weights(tmp_path, sample_path):
     r = json.loads(report.read_text())
     assert r["counts"]["weights_matched"] == 1 and r["counts"]["targets_undriven"] == 8 and r["counts"]["frames"] == 6
     assert any("got no weight" in w for w in r["warnings"])
+
+
+def test_verify_reloads_the_capture_from_the_metadata(tmp_path, sample_path):
+    from converter.convert import convert
+    from converter.options import ConversionOptions
+    from converter.verify import verify_file
+
+    path = tmp_path / "w.json"
+    path.write_text(json.dumps([{"time": k / 10, "blendshapes": {"jawOpen": k / 5}} for k in range(6)]))
+    result = convert(sample_path, ConversionOptions(size=128, weights=str(path)))
+    (tmp_path / "o.svg").write_bytes(result.data)
+    v = verify_file(tmp_path / "o.svg", sample_path)
+    assert v.ok and v.frames == 6, v.summary()
