@@ -155,7 +155,7 @@ def drive(face: MorphFace, track: WeightTrack, fps: float | None = None,
     weights_info = {
         "weights_matched": len(track.names) - len(m.unmatched_weights) - len(m.duplicates),
         "weights_unmatched": len(m.unmatched_weights),
-        "targets_driven": int(len(driven)),
+        "targets_driven": len(driven),
         "targets_undriven": len(m.undriven_targets),
         "head_rotation_applied": int(head is not None),
         "eye_rotation_applied": int(apply_eyes),

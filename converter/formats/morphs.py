@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import base64
 import gzip
+import io
 import json
 import struct
-import io
 import zipfile
 import zlib
 from dataclasses import dataclass, field

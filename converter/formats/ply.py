@@ -39,10 +39,8 @@ def read_ply(data: bytes, name: str = "mesh.ply") -> tuple[np.ndarray, np.ndarra
     colors = None
     if mesh.visual.kind == "vertex":
         rgb = np.asarray(mesh.visual.vertex_colors)[:, :3].astype(np.float32) / 255.0
-        if not np.allclose(rgb, rgb[:1]):  # trimesh fills a default grey when the file has none
-            colors = rgb
-        elif b"red" in data[:4096]:
-            colors = rgb
+        if b"property uchar red" in data[:4096] or b"property float red" in data[:4096]:
+            colors = rgb  # only colours the file has: trimesh fills in a default grey otherwise
     return v, f.astype(np.int32), colors
 
 

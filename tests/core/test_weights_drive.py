@@ -4,11 +4,13 @@ import csv
 import gzip
 import io
 import json
+import re
 import resource
 import time
 import zipfile
 from functools import lru_cache
 from pathlib import Path
+from xml.sax.saxutils import unescape
 
 import numpy as np
 import pytest
@@ -73,7 +75,7 @@ def ict_names(csv_name: str, shapes: set[str]) -> list[str]:
 
 
 def test_llf_jaw_open_moves_the_jaw_by_its_shape_delta(driven, shared_data):
-    face, anim = driven
+    _, anim = driven
     folder = shared_data / "ict_facekit" / "FaceXModel"
     neutral = obj_vertices(folder / "generic_neutral_mesh.obj.gz")
     jaw = obj_vertices(folder / "jawOpen.obj.gz") - neutral
@@ -97,7 +99,7 @@ def test_llf_jaw_open_moves_the_jaw_by_its_shape_delta(driven, shared_data):
 
 def test_llf_eye_yaw_turns_the_eyeballs_rigidly(driven, shared_data):
     face, anim = driven
-    left, right = blendshapes.eye_vertices(face)
+    left, _ = blendshapes.eye_vertices(face)
     track = read_weights(shared_data / LLF)
     k = int(np.argmax(np.abs(track.eye_left[:, 0])))
     rest, moved = face.base[left].astype(np.float64), anim.frames[k, left].astype(np.float64)
@@ -119,7 +121,7 @@ def test_llf_driven_ict_plays_in_chromium(driven, browser, artifacts):
     from converter.convert import convert_animation
     from converter.options import ConversionOptions
 
-    face, anim = driven
+    _, anim = driven
     # The front of the face, every 4th triangle, 30 frames around the widest jaw opening: small enough for a test.
     w = read_weights_jaw(anim)
     k0 = max(0, int(np.argmax(w)) - 15)
@@ -130,9 +132,8 @@ def test_llf_driven_ict_plays_in_chromium(driven, browser, artifacts):
                           anim.fps, "ict-llf")
     result = convert_animation(small, ConversionOptions(size=192))
     assert b"<svg" in result.data[:200]
-    meta = json.loads(__import__("xml.sax.saxutils", fromlist=["unescape"]).unescape(
-        __import__("re").search(rb'<metadata id="facesvg">(.*?)</metadata>', result.data, __import__("re").S)
-        .group(1).decode()))
+    meta = json.loads(unescape(re.search(rb'<metadata id="facesvg">(.*?)</metadata>', result.data, re.S).group(1)
+                               .decode()))
     assert meta["frames"] == 30 and meta["fps"] == pytest.approx(60.0)
     a = chromium_frame(browser, result.data, 0.0, 192, 192)
     b = chromium_frame(browser, result.data, 15 / 60, 192, 192)
