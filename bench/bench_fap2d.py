@@ -30,7 +30,7 @@ TARGET_2D_TRIANGLES = 1000
 def ict_face():
     """The ICT head as a one-frame FaceAnimation, its FDP and the engine's deformation."""
     from converter.animation import FaceAnimation
-    from samples.ictfacekit import load_ict_head
+    from converter.formats.ictfacekit import load_ict_head
     from converter.mpeg4 import fat2d
     from converter.mpeg4.fdp import load_fdp
 

@@ -33,7 +33,7 @@ def _timed(fn, repeats: int, cpu: list | None = None) -> list[float]:
 
 def _ict():
     from converter.animation import FaceAnimation
-    from samples.ictfacekit import load_ict_head
+    from converter.formats.ictfacekit import load_ict_head
     from samples.ict_fdp import ict_fdp
 
     head = load_ict_head(DATA / "ict_facekit")

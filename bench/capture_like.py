@@ -37,7 +37,7 @@ if str(ROOT) not in sys.path:
 from bench.faces import HEAD_PIVOT, ict_head  # noqa: E402
 from converter.animation import FaceAnimation  # noqa: E402
 from samples.ict_region import face_region, sphere_center  # noqa: E402
-from samples.ictfacekit import PART_ORDER  # noqa: E402
+from converter.formats.ictfacekit import PART_ORDER  # noqa: E402
 
 FRAMES = 335
 FPS = 30.0

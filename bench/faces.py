@@ -16,7 +16,7 @@ if str(ROOT) not in sys.path:
 
 from converter.animation import FaceAnimation  # noqa: E402
 from samples.ict_region import NARROW_FACE_VERTICES, Piece, face_region  # noqa: E402
-from samples.ictfacekit import PART_ORDER, IctHead, load_ict_head  # noqa: E402
+from converter.formats.ictfacekit import PART_ORDER, IctHead, load_ict_head  # noqa: E402
 
 ICT_FOLDER = ROOT.parent / "shared" / "data" / "ict_facekit"
 HEAD_PIVOT = np.array([0.0, -6.0, 0.0])  # the neck, in ICT cm

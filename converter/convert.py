@@ -29,13 +29,19 @@ class Result:
     report: Report
 
 
-def load(path: str | Path, options: ConversionOptions, cache: str | Path | None = None) -> FaceAnimation:
+def load(path: str | Path, options: ConversionOptions, cache: str | Path | None = None,
+         progress: Progress = no_progress) -> FaceAnimation:
     """Read the input file named by path (plus an optional point cache) with the options' fps and animation."""
+    if options.weights:  # the input is a face with named morph targets, animated by the capture
+        return drive_file(path, options.weights, fps=options.fps, progress=lambda s, f: progress(s, 0.05 * f))
     return formats.load(path, fps=options.fps, cache=cache, animation=options.animation)
 
 
 def prepare(anim: FaceAnimation, options: ConversionOptions, report: Report, progress: Progress = no_progress) -> FaceAnimation:
     """The optional 3D stages in order: FAP driving, frame range, cloning, triangle budget."""
+    if "weights" in anim.extras:  # what the weight capture matched, from load()
+        report.counts.update(anim.extras["weights"]["counts"])
+        report.warnings.extend(anim.extras["weights"]["warnings"])
     if options.fap and not output_kind(options.to).takes_fap_stream:  # e.g. the fap2d package carries the stream
         t = time.perf_counter()
         anim = mpeg4.drive(anim, options.fap, options.fdp, fps=options.fps)
@@ -120,8 +126,9 @@ def convert(path: str | Path, options: ConversionOptions, progress: Progress = n
     """Convert an input file with the options: the whole pipeline, nothing written to disk."""
     t = time.perf_counter()
     progress("load", 0.0)
-    anim = load(path, options, cache)
+    anim = load(path, options, cache, progress)
     load_s = time.perf_counter() - t
-    result = convert_animation(anim, options, progress, source_sha256=file_sha256(path), on_prepared=on_prepared)
+    sha = file_sha256(path) if Path(path).is_file() else ""  # an ICT FaceKit folder has no one file to hash
+    result = convert_animation(anim, options, progress, source_sha256=sha, on_prepared=on_prepared)
     result.report.timings = {"load": load_s, **result.report.timings}
     return result

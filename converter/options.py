@@ -131,6 +131,9 @@ class ConversionOptions:
                                     path=True, accept=".zip", advanced=True)
     correspondences: str | None = option(None, "your own point correspondences, for dense cloning",
                                          label="Correspondences", path=True, advanced=True)
+    weights: str | None = option(None, "blendshape weight capture (Live Link Face CSV, ARKit weight JSON) that "
+                                 "drives the face's named morph targets", label="Weight capture", path=True,
+                                 accept=".csv,.json", advanced=True)
 
     def __post_init__(self) -> None:
         for spec in option_fields():

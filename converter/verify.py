@@ -401,8 +401,7 @@ def verify_animation(data: bytes, anim, tolerance: float | None = None) -> Verif
 def verify_file(svg_path: str | Path, input_path: str | Path, cache: str | Path | None = None,
                 tolerance: float | None = None) -> Verification:
     """Verify an SVG written by facesvg against the input it was converted from."""
-    from converter import formats
-    from converter.convert import prepare
+    from converter.convert import load, prepare
     from converter.options import ConversionOptions, Report
 
     try:
@@ -412,7 +411,7 @@ def verify_file(svg_path: str | Path, input_path: str | Path, cache: str | Path 
     meta = metadata_of(read_svg(data))
     opts = meta.get("options", {})
     options = ConversionOptions.from_mapping({k: v for k, v in opts.items() if not isinstance(v, (dict, list))})
-    anim = formats.load(input_path, fps=options.fps, cache=cache, animation=options.animation)
+    anim = load(input_path, options, cache)  # with the options' --weights capture, when it was driven by one
     anim = prepare(anim, options, Report())
     return verify_animation(data, anim, tolerance)
 

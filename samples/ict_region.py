@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from samples.ictfacekit import EYEBALL_LEFT, EYEBALL_RIGHT, PART_ORDER, IctHead
+from converter.formats.ictfacekit import EYEBALL_LEFT, EYEBALL_RIGHT, PART_ORDER, IctHead
 
 FACE_VERTICES = 9409  # ICT "Face" geometry: vertex ids [0, 9409)
 NARROW_FACE_VERTICES = 6706  # ICT "Narrow face area": vertex ids [0, 6706), no ears or neck

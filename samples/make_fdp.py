@@ -21,7 +21,7 @@ from converter import formats  # noqa: E402
 from converter.mpeg4.facepoints import mediapipe_fdp, transfer_fdp  # noqa: E402
 from converter.mpeg4.fdp import save_fdp  # noqa: E402
 from samples.ict_fdp import ict_fdp  # noqa: E402
-from samples.ictfacekit import load_ict_head  # noqa: E402
+from converter.formats.ictfacekit import load_ict_head  # noqa: E402
 
 
 def main(data: Path) -> None:

@@ -24,7 +24,7 @@ sys.path.insert(0, str(ROOT))
 from converter.animation import DEFAULT_PART_COLORS  # noqa: E402
 from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder, encode_filter  # noqa: E402
 from samples.ict_region import face_region, sphere_center  # noqa: E402
-from samples.ictfacekit import IctHead, load_ict_head  # noqa: E402
+from converter.formats.ictfacekit import IctHead, load_ict_head  # noqa: E402
 
 EXPRESSIONS = ("mouthSmile_L", "mouthSmile_R", "jawOpen", "eyeBlink_L", "eyeBlink_R",
                "browInnerUp_L", "browInnerUp_R", "browOuterUp_L", "browOuterUp_R")

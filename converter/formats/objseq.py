@@ -1,4 +1,4 @@
-"""A .zip of numbered OBJ frames (one topology), or of one OBJ plus a .pc2/.mdd cache, to FaceAnimation.
+"""A .zip of numbered OBJ or PLY frames (one topology), or of one mesh plus a .pc2/.mdd/.npy cache, to FaceAnimation.
 
 The zip is read in memory and never extracted. Refused: entries with absolute paths or '..', symlinks,
 encrypted entries, more than MAX_ENTRIES entries, more than MAX_TOTAL bytes uncompressed, or a compression
@@ -16,7 +16,7 @@ import zlib
 
 import numpy as np
 
-from converter.animation import FaceAnimation
+from converter.animation import DEFAULT_PART_COLORS, FaceAnimation, Part
 from converter.errors import InputError
 from converter.formats.obj import parse_obj, parse_obj_vertices
 from converter.formats.parts import parts_for_groups
@@ -39,32 +39,53 @@ def load_zip(data: bytes, fps: float | None = None, name: str = "face") -> FaceA
         raise InputError(f"{name} is not a readable zip file; it is truncated or corrupt.") from None
     files = check_entries(infos, name)
     objs = [i for i in files if i.filename.lower().endswith(".obj")]
-    caches = [i for i in files if i.filename.lower().endswith((".pc2", ".mdd"))]
-    if not objs:
-        raise InputError(f"{name} contains no .obj files; zip numbered OBJ frames (frame_0001.obj, ...).")
+    plys = [i for i in files if i.filename.lower().endswith(".ply")]
+    caches = [i for i in files if i.filename.lower().endswith((".pc2", ".mdd", ".npy"))]
+    meshes = objs or plys
+    if not meshes:
+        raise InputError(f"{name} contains no .obj or .ply files; zip numbered OBJ or PLY frames (frame_0001.obj, "
+                         "...), or one mesh with its .pc2/.mdd/.npy cache.")
     if caches:
-        if len(objs) != 1 or len(caches) != 1:
-            raise InputError(f"{name} must hold one .obj and one .pc2/.mdd, or only numbered .obj frames; "
-                             f"it has {len(objs)} .obj and {len(caches)} cache files.")
-        from converter.formats.pointcache import load_obj_cache
+        if len(objs) + len(plys) != 1 or len(caches) != 1:
+            raise InputError(f"{name} must hold one mesh (.obj/.ply) and one .pc2/.mdd/.npy cache, or only numbered "
+                             f"frames; it has {len(objs) + len(plys)} meshes and {len(caches)} cache files.")
+        from converter.formats.pointcache import animate, load_obj_cache
 
-        return load_obj_cache(read(zf, objs[0], name), read(zf, caches[0], name), fps=fps, name=name)
-    objs.sort(key=lambda i: natural_key(i.filename))
-    first_name = objs[0].filename
-    rest, faces, group_of_face, groups = parse_obj(read(zf, objs[0], name).decode("utf-8", errors="replace"),
-                                                   first_name)
-    frames = np.empty((len(objs), len(rest), 3), np.float32)
+        if objs:
+            return load_obj_cache(read(zf, objs[0], name), read(zf, caches[0], name), fps=fps, name=name)
+        from converter.formats.ply import load_ply_static
+
+        return animate(load_ply_static(read(zf, plys[0], name), name=name), read(zf, caches[0], name), fps=fps)
+    if objs and plys:
+        raise InputError(f"{name} mixes .obj and .ply frames; zip frames of one format.")
+    meshes.sort(key=lambda i: natural_key(i.filename))
+    first_name = meshes[0].filename
+    if plys:
+        from converter.formats.ply import read_ply
+
+        rest, faces, vertex_colors = read_ply(read(zf, meshes[0], name), first_name)
+        parts, part_ids = (Part("skin", DEFAULT_PART_COLORS["skin"]),), np.zeros(len(faces), np.int32)
+
+        def vertices(info: zipfile.ZipInfo) -> np.ndarray:
+            return read_ply(read(zf, info, name), info.filename)[0]
+    else:
+        rest, faces, group_of_face, groups = parse_obj(read(zf, meshes[0], name).decode("utf-8", errors="replace"),
+                                                       first_name)
+        parts, part_ids = parts_for_groups(groups, group_of_face, material_colors(zf, files, name))
+        vertex_colors = None
+
+        def vertices(info: zipfile.ZipInfo) -> np.ndarray:
+            return parse_obj_vertices(read(zf, info, name).decode("utf-8", errors="replace"), info.filename)
+    frames = np.empty((len(meshes), len(rest), 3), np.float32)
     frames[0] = rest
-    for k, info in enumerate(objs[1:], 1):
-        v = parse_obj_vertices(read(zf, info, name).decode("utf-8", errors="replace"), info.filename)
+    for k, info in enumerate(meshes[1:], 1):
+        v = vertices(info)
         if len(v) != len(rest):
             raise InputError(f"{info.filename} has {len(v)} vertices but {first_name} has {len(rest)}; every "
                              "frame must have the same topology.")
         frames[k] = v
-    colors = material_colors(zf, files, name)
-    parts, part_ids = parts_for_groups(groups, group_of_face, colors)
-    return FaceAnimation(frames, faces, part_ids, parts, float(fps or DEFAULT_FPS), name,
-                         extras={"frame_files": [objs[0].filename, objs[-1].filename]})
+    return FaceAnimation(frames, faces, part_ids, parts, float(fps or DEFAULT_FPS), name, vertex_colors=vertex_colors,
+                         extras={"frame_files": [meshes[0].filename, meshes[-1].filename]})
 
 
 def check_entries(infos: list[zipfile.ZipInfo], name: str) -> list[zipfile.ZipInfo]:

@@ -1,4 +1,4 @@
-"""OBJ rest mesh + PC2 or MDD point cache to FaceAnimation.
+"""A rest mesh (OBJ, or any loader's one frame) + a PC2, MDD or .npy point cache to FaceAnimation.
 
 PC2 (3ds Max, Blender, Maya): 'POINTCACHE2\\0', int32 version, int32 points, float32 start frame, float32 sample
 rate (scene frames per sample), int32 samples, then float32 xyz; little-endian. PC2 does not store the scene's
@@ -8,6 +8,10 @@ usual sampleRate 1 every sample is one output frame.
 MDD (LightWave, Blender): big-endian int32 frames, int32 points, float32 times[frames] in seconds, then float32
 xyz per frame. Times, when increasing, set the source rate; the cache is resampled (linearly) to `fps`.
 
+.npy (speech-driven face research: VOCASET, FaceFormer, BIWI): a float array (T, V, 3) or (T, V*3) of vertex
+positions in the template mesh's order, one frame per row; no rate is stored (VOCASET is 60 fps, BIWI 25; give
+--fps, default 30).
+
 Axes. Blender writes MDD in its own Z-up world space (recent exporters; Blender 2.5x swapped y and z instead)
 while its OBJ exporter writes Y-up by default, so the cache and the OBJ disagree by an axis change. With
 axes="auto" (default) we try the candidate axis maps in AXIS_MAPS on the first cache frame and keep the one
@@ -16,6 +20,7 @@ that lands closest to the OBJ rest positions (identity wins ties); "none", "zup"
 
 from __future__ import annotations
 
+import io
 import math
 import struct
 
@@ -29,6 +34,7 @@ from converter.formats.parts import parts_for_groups
 DEFAULT_FPS = 30.0
 MAX_FRAMES = 100_000
 PC2_MAGIC = b"POINTCACHE2\0"
+NPY_MAGIC = b"\x93NUMPY"
 # Each map takes cache (x, y, z) to OBJ axes.
 AXIS_MAPS = {
     "none": lambda p: p,
@@ -47,18 +53,28 @@ def load_obj_static(obj_bytes: bytes, fps: float | None = None, name: str = "fac
 
 def load_obj_cache(obj_bytes: bytes, cache_bytes: bytes, fps: float | None = None, name: str = "face",
                    axes: str = "auto") -> FaceAnimation:
-    """An OBJ rest mesh animated by a PC2 or MDD point cache, resampled at fps (default: the cache's rate)."""
+    """An OBJ rest mesh animated by a PC2, MDD or .npy point cache, resampled at fps (default: the cache's rate)."""
+    rest, faces, groups_of_face, groups = parse_obj(obj_bytes.decode("utf-8", errors="replace"), f"{name}.obj")
+    parts, part_ids = parts_for_groups(groups, groups_of_face)
+    return animate(FaceAnimation(rest[None], faces, part_ids, parts, DEFAULT_FPS, name), cache_bytes, fps, axes, "OBJ")
+
+
+def animate(mesh: FaceAnimation, cache_bytes: bytes, fps: float | None = None, axes: str = "auto",
+            kind: str = "mesh") -> FaceAnimation:
+    """A one-frame rest mesh (from any loader) animated by a PC2, MDD or .npy point cache."""
     if fps is not None and not (math.isfinite(fps) and fps > 0):
         raise InputError(f"fps must be a positive number, got {fps}.")
     if axes not in ("auto", *AXIS_MAPS):
         raise InputError(f"unknown axes {axes!r}; use auto, none, zup or swapyz.")
-    rest, faces, groups_of_face, groups = parse_obj(obj_bytes.decode("utf-8", errors="replace"), f"{name}.obj")
+    rest = mesh.frames[0]
     if cache_bytes[:12] == PC2_MAGIC:
         points, times = read_pc2(cache_bytes, fps or DEFAULT_FPS)
+    elif cache_bytes[:6] == NPY_MAGIC:
+        points, times = read_npy(cache_bytes, len(rest)), np.zeros(0)
     else:
         points, times = read_mdd(cache_bytes)
     if points.shape[1] != len(rest):
-        raise InputError(f"the point cache has {points.shape[1]} points but the OBJ has {len(rest)} vertices; "
+        raise InputError(f"the point cache has {points.shape[1]} points but the {kind} has {len(rest)} vertices; "
                          "export both from the same mesh.")
     if not np.isfinite(points).all():
         raise InputError("the point cache has NaN or infinite positions; re-export it.")
@@ -68,9 +84,35 @@ def load_obj_cache(obj_bytes: bytes, cache_bytes: bytes, fps: float | None = Non
     if source_fps is None:  # no usable times: one sample per output frame
         times = np.arange(len(points)) / out_fps
     frames = resample(points, times, out_fps)
-    parts, part_ids = parts_for_groups(groups, groups_of_face)
-    return FaceAnimation(frames, faces, part_ids, parts, out_fps, name,
-                         extras={"source_fps": source_fps, "cache_frames": int(len(points))})
+    extras = {k: v for k, v in mesh.extras.items() if k != "static"}
+    return mesh.with_frames(frames, fps=out_fps,
+                            extras={**extras, "source_fps": source_fps, "cache_frames": int(len(points))})
+
+
+def read_npy(data: bytes, n_points: int) -> np.ndarray:
+    """A NumPy vertex array (T, V, 3), or (T, V*3) as VOCASET/FaceFormer store it, as float32 (T, V, 3).
+
+    Read with allow_pickle=False: an .npy can carry pickled objects, which we never load.
+    """
+    try:
+        arr = np.load(io.BytesIO(data), allow_pickle=False)
+    except ValueError as exc:
+        if "pickle" in str(exc).lower():
+            raise InputError("the .npy holds pickled Python objects, which facesvg does not load; save the vertices "
+                             "as a plain float array (np.save(path, vertices.astype('float32'))).") from None
+        raise InputError(f"the .npy vertex array is not readable ({str(exc)[:60]}); re-save it.") from None
+    except (OSError, EOFError):
+        raise InputError("the .npy vertex array is truncated; re-save it.") from None
+    if arr.dtype.kind not in "fiu":
+        raise InputError(f"the .npy vertex array holds {arr.dtype} values, not numbers; save float vertices.")
+    if arr.ndim == 2 and arr.shape[1] == 3 * n_points:
+        arr = arr.reshape(len(arr), n_points, 3)
+    if arr.ndim != 3 or arr.shape[2] != 3 or len(arr) == 0:
+        raise InputError(f"the .npy vertex array has shape {arr.shape}; it must be (frames, {n_points}, 3) or "
+                         f"(frames, {3 * n_points}) for this mesh.")
+    if len(arr) > MAX_FRAMES:
+        raise InputError(f"the .npy vertex array has {len(arr)} frames, more than {MAX_FRAMES}; trim it.")
+    return arr.astype(np.float32)
 
 
 def read_pc2(data: bytes, scene_fps: float) -> tuple[np.ndarray, np.ndarray]:

@@ -9,7 +9,7 @@ import meshoptimizer
 import numpy as np
 
 from converter.animation import FaceAnimation
-from samples.ictfacekit import load_ict_head
+from converter.formats.ictfacekit import load_ict_head
 
 ICT = Path(__file__).resolve().parents[3] / "shared" / "data" / "ict_facekit"
 KEEP_PARTS = ("skin", "eye", "iris")  # the face surface and the eyeballs (rigid parts)

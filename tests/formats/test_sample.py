@@ -49,7 +49,7 @@ def test_twin_is_gltfpack_style_and_matches_within_quantisation(sample, twin, sa
 
 
 def test_frame_zero_is_the_ict_head_in_its_own_units(sample, shared_data):
-    from samples.ictfacekit import load_ict_head
+    from converter.formats.ictfacekit import load_ict_head
 
     head = load_ict_head(shared_data / "ict_facekit")
     dist, _ = cKDTree(head.vertices).query(sample.frames[0])
@@ -78,7 +78,7 @@ def test_make_sample_is_deterministic_and_matches_the_committed_files(shared_dat
     spec = importlib.util.spec_from_file_location("make_sample", ROOT / "samples" / "make_sample.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    from samples.ictfacekit import load_ict_head
+    from converter.formats.ictfacekit import load_ict_head
 
     head = load_ict_head(shared_data / "ict_facekit")
     assert mod.build(head, False) == sample_path.read_bytes()

@@ -11,7 +11,7 @@ from converter.mpeg4.tables import FaceDefTables, build_tables
 
 @pytest.fixture(scope="module")
 def ict(shared_data):
-    from samples.ictfacekit import load_ict_head
+    from converter.formats.ictfacekit import load_ict_head
     from samples.ict_fdp import ict_fdp
 
     head = load_ict_head(shared_data / "ict_facekit")

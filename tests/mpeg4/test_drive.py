@@ -90,7 +90,7 @@ def test_cli_fdp_auto_on_sample(sample_path, sample, tmp_path, capsys):
 
 def test_auto_on_ict_head_close_to_landmarks(shared_data):
     from converter.animation import FaceAnimation
-    from samples.ictfacekit import load_ict_head
+    from converter.formats.ictfacekit import load_ict_head
     from converter.mpeg4.auto import auto_fdp
     from samples.ict_fdp import ict_fdp
 

@@ -117,7 +117,7 @@ def _mirror_ok(fdp: Fdp, v: np.ndarray, tol: float) -> None:
 
 
 def test_ict_fdp_matches_bundled_and_is_sane(shared_data):
-    from samples.ictfacekit import load_ict_head
+    from converter.formats.ictfacekit import load_ict_head
     from samples.ict_fdp import ict_fdp
 
     fdp = ict_fdp(shared_data / "ict_facekit")

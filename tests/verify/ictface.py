@@ -17,7 +17,7 @@ EXPRESSIONS = ("jawOpen", "mouthSmile_L", "mouthSmile_R", "eyeBlink_L", "eyeBlin
 def ict_face(n_frames: int = 40, fps: float = 25.0, turn: float = 20.0, front: float = 0.0,
              stride: int = 1) -> FaceAnimation:
     """Front of the ICT head (centroid z > front cm) with every n-th triangle, expressions and a yaw/pitch sway."""
-    from samples.ictfacekit import load_ict_head
+    from converter.formats.ictfacekit import load_ict_head
 
     head = load_ict_head(ICT)
     v = head.vertices.astype(np.float64)
