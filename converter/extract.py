@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from converter import render
+from converter import idpass, render
 from converter.animation import FaceAnimation, face_normals, vertex_normals
 from converter.camera import Camera
 from converter.errors import InputError
@@ -63,9 +63,8 @@ def extract(
     progress("project", 0.1)
     if occlusion:
         sel = slice(None) if occlusion_frames is None else np.asarray(occlusion_frames, np.int64)
-        seen = render.triangle_ids(frames[sel], faces, camera,
-                                   progress=lambda f: progress("occlusion", 0.1 + 0.6 * f))
-        kept = (seen & visible[sel]).any(axis=0)
+        kept = idpass.ever_seen(frames[sel], faces, camera, visible[sel],
+                                progress=lambda f: progress("occlusion", 0.1 + 0.6 * f))
     else:
         kept = visible.any(axis=0)
     progress("shade", 0.75)
