@@ -118,7 +118,7 @@ def test_on_the_sample_every_pixel_owner_is_kept_and_fewer_visible_triangles_are
     # Old = the multisampled pyrender pass this replaced. Every triangle owning a pixel centre (the centre
     # samples of a 5x finer id render) is kept, which the old pass fails (80 of them at 192 px, lost in MSAA
     # blends); of the triangles owning any sample of the 5x render, the new pass misses fewer than the old
-    # (33 vs 111 when written: sub-pixel ones whose centroid is covered, see converter.idpass).
+    # (about a quarter as many when written: sub-pixel slivers covered at every probe, see converter.idpass).
     from bench.legacy_occlusion import legacy_triangle_ids
     from converter.extract import fit_camera
     from converter.formats import load
