@@ -41,8 +41,8 @@ ids into the code of a third (541 on the capture-like face, 511 of them own no s
 the 30 visible ones are sub-pixel slivers covered at all four probes of rule 2 (converter.idpass). new-old: every
 triangle owning a pixel centre that the old pass lost in MSAA blends (65), plus sub-pixel triangles rule 2 keeps
 because they are not behind the surface at a probe; those that no 5x sample shows are hidden just behind steep lip
-and lid margins, where the rule errs on the safe side (bytes, never a hole). Net: fewer triangles kept and about a
-third as many visible ones missed. On the dense head the old pass left ~550 px of lost coverage per frame (the white
+and lid margins, where the rule errs on the safe side (bytes, never a hole). Net: fewer triangles kept and a third to a half
+as many visible ones missed. On the dense head the old pass left ~550 px of lost coverage per frame (the white
 speckles of issue 15.8), the new one 2-4 px. The sample's goldens (tests/golden) did not change.
 Measured while five other sessions shared the 2 cores (load average 15-20): CPU seconds include contention in
 llvmpipe's threads, so both columns are inflated; the ratio (5.0x) is the figure to read.
