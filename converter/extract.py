@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from converter import render
+from converter import idpass, render
 from converter.animation import FaceAnimation, face_normals, vertex_normals
 from converter.camera import Camera
 from converter.errors import InputError
 from converter.lighting import DEFAULT_LIGHTING, Lighting, lambert
 from converter.options import Progress, no_progress
 from converter.sheet import Sheet
+
+FRAME_BLOCK = 32  # frames per block of the per-frame work (every result is per frame, so blocks change no byte)
 
 
 def fit_camera(anim: FaceAnimation, size: int = 512, yaw: float = 0.0, pitch: float = 0.0,
@@ -41,6 +43,11 @@ def painter_order(depth: np.ndarray, faces: np.ndarray, candidates: np.ndarray, 
     return candidates[np.argsort(-centroid, kind="stable")].astype(np.int32)
 
 
+def _blocks(n_frames: int) -> list[slice]:
+    """Frame blocks for projection, culling and shading: their float64 temporaries scale with a block, not the clip."""
+    return [slice(s, min(s + FRAME_BLOCK, n_frames)) for s in range(0, n_frames, FRAME_BLOCK)]
+
+
 def extract(
     anim: FaceAnimation,
     camera: Camera,
@@ -58,20 +65,27 @@ def extract(
     if not (0 <= neutral < anim.n_frames):
         raise InputError(f"neutral frame {neutral} is outside 0..{anim.n_frames - 1}; choose one inside.")
     frames, faces = anim.frames, anim.faces
-    xy, ndc_z, w = camera.project(frames)
-    visible = cull(xy, ndc_z, w, faces, camera.width, camera.height)
+    t, v, f = anim.n_frames, anim.n_vertices, anim.n_faces
+    xy, depth, visible = np.empty((t, v, 2), np.float32), np.empty((t, v), np.float32), np.empty((t, f), bool)
+    for blk in _blocks(t):
+        bxy, bz, bw = camera.project(frames[blk])
+        visible[blk] = cull(bxy, bz, bw, faces, camera.width, camera.height)
+        xy[blk], depth[blk] = bxy, bz
     progress("project", 0.1)
     if occlusion:
         sel = slice(None) if occlusion_frames is None else np.asarray(occlusion_frames, np.int64)
-        seen = render.triangle_ids(frames[sel], faces, camera,
-                                   progress=lambda f: progress("occlusion", 0.1 + 0.6 * f))
-        kept = (seen & visible[sel]).any(axis=0)
+        kept = idpass.ever_seen(frames[sel], faces, camera, visible[sel],
+                                progress=lambda f: progress("occlusion", 0.1 + 0.6 * f))
     else:
         kept = visible.any(axis=0)
     progress("shade", 0.75)
-    face_rgb = lambert(face_normals(frames, faces), anim.triangle_colors()[None], camera.view, lighting)
-    vertex_rgb = lambert(vertex_normals(frames, faces), anim.face_base_colors()[None], camera.view, lighting)
-    order = painter_order(ndc_z, faces, np.flatnonzero(kept), neutral)
+    face_rgb, vertex_rgb = np.empty((t, f, 3), np.float32), np.empty((t, v, 3), np.float32)
+    tri_rgb, vert_base = anim.triangle_colors()[None], anim.face_base_colors()[None]
+    for blk in _blocks(t):
+        face_rgb[blk] = lambert(face_normals(frames[blk], faces), tri_rgb, camera.view, lighting)
+        vertex_rgb[blk] = lambert(vertex_normals(frames[blk], faces), vert_base, camera.view, lighting)
+    _, neutral_z, _ = camera.project(frames[neutral:neutral + 1])  # float64: the order must not see rounding
+    order = painter_order(neutral_z, faces, np.flatnonzero(kept), 0)
     refs = {}
     if reference_frames:
         bad = [k for k in reference_frames if not 0 <= k < anim.n_frames]
@@ -89,14 +103,14 @@ def extract(
     return Sheet(
         camera=camera,
         fps=anim.fps,
-        xy=xy.astype(np.float32),
-        depth=ndc_z.astype(np.float32),
+        xy=xy,
+        depth=depth,
         faces=faces,
         visible=visible,
         kept=kept,
         order=order,
-        face_rgb=face_rgb.astype(np.float32),
-        vertex_rgb=vertex_rgb.astype(np.float32),
+        face_rgb=face_rgb,
+        vertex_rgb=vertex_rgb,
         part_ids=anim.part_ids,
         part_names=tuple(p.name for p in anim.parts),
         neutral=neutral,

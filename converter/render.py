@@ -1,4 +1,4 @@
-"""Offscreen OpenGL through pyrender on Mesa EGL: the prerender and the triangle-id pass."""
+"""Offscreen OpenGL through pyrender on Mesa EGL: the prerender (the triangle-id pass is converter.idpass)."""
 
 from __future__ import annotations
 
@@ -71,32 +71,6 @@ def _mesh(positions: np.ndarray, faces: np.ndarray, colors: np.ndarray, smooth: 
     else:
         tm = trimesh.Trimesh(positions, faces, face_colors=colors, process=False)
     return pyrender.Mesh.from_trimesh(tm, smooth=smooth)
-
-
-def triangle_ids(frames: np.ndarray, faces: np.ndarray, camera: Camera, progress=None) -> np.ndarray:
-    """Bool (T, F): which triangles cover at least one pixel of each frame's id render."""
-    pyrender = _pyrender()
-    t, f = frames.shape[0], faces.shape[0]
-    ids = np.arange(1, f + 1, dtype=np.int64)
-    rgba = np.stack([ids & 255, (ids >> 8) & 255, (ids >> 16) & 255, np.full(f, 255)], axis=1).astype(np.uint8)
-    seen = np.zeros((t, f), bool)
-    flags = pyrender.RenderFlags.FLAT
-    with offscreen(camera.width, camera.height) as r:
-        scene = _scene(camera)
-        node = None
-        for k in range(t):
-            if node is not None:
-                scene.remove_node(node)
-            node = scene.add(_mesh(frames[k], faces, rgba, smooth=False))
-            color, _ = r.render(scene, flags=flags)
-            px = color.reshape(-1, 3).astype(np.int64)
-            code = px[:, 0] | (px[:, 1] << 8) | (px[:, 2] << 16)
-            code = code[(code > 0) & (code <= f)]
-            # Multisampling blends ids along edges; a blend can only add a triangle, never hide one.
-            seen[k, np.unique(code) - 1] = True
-            if progress:
-                progress((k + 1) / t)
-    return seen
 
 
 def render_frames(
