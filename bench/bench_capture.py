@@ -20,11 +20,11 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from bench.capture_like import capture_like, motion_stats  # noqa: E402
-from converter import extract, freeknots, keyframes, smoothing  # noqa: E402
-from converter.options import ConversionOptions, Report  # noqa: E402
-from converter.verify import verify_animation  # noqa: E402
-from converter.writers import svg_anim  # noqa: E402
+from bench.capture_like import capture_like, motion_stats
+from converter import extract, freeknots, keyframes, smoothing
+from converter.options import ConversionOptions, Report
+from converter.verify import verify_animation
+from converter.writers import svg_anim
 
 TITLE = "Captured motion: rigid factoring, size levers, default tolerance (issue 9)"
 OUT = ROOT / "bench" / "out"

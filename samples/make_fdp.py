@@ -17,10 +17,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from converter import formats  # noqa: E402
-from converter.formats.ictfacekit import load_ict_head  # noqa: E402
-from converter.mpeg4.facepoints import ict_fdp, mediapipe_fdp, transfer_fdp  # noqa: E402
-from converter.mpeg4.fdp import save_fdp  # noqa: E402
+from converter import formats
+from converter.formats.ictfacekit import load_ict_head
+from converter.mpeg4.facepoints import ict_fdp, mediapipe_fdp, transfer_fdp
+from converter.mpeg4.fdp import save_fdp
 
 
 def main(data: Path) -> None:

@@ -117,13 +117,13 @@ def test_single_obj_is_a_still_face(tmp_path):
 
 
 @pytest.mark.slow
-def test_convert_clones_onto_another_face(sample_path, shared_data, tmp_path):
+def test_convert_clones_onto_another_face(sample_path, small_data, tmp_path):
     """`convert --clone-target` runs the cloning stage: the SVG draws the target's triangles, animated."""
     import json
 
     from converter.verify import evaluate
 
-    target = shared_data / "mediapipe_canonical" / "canonical_face_model.obj"
+    target = small_data / "mediapipe_canonical" / "canonical_face_model.obj"
     out = tmp_path / "cloned.svg"
     r = run("convert", sample_path, "-o", out, "--size", "128", "--end", "40", "--clone-target", target,
             "--report", tmp_path / "r.json")

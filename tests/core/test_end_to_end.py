@@ -5,7 +5,6 @@ import re
 
 import numpy as np
 import pytest
-from svgrender import chromium_frame, iou
 
 from converter import formats, render
 from converter.animation import vertex_normals
@@ -13,6 +12,7 @@ from converter.camera import Camera
 from converter.convert import convert
 from converter.lighting import lambert
 from converter.options import ConversionOptions
+from svgrender import chromium_frame, iou
 
 
 def metadata(svg: bytes) -> dict:

@@ -1,7 +1,6 @@
 """Golden files guard the exact SVG we generate for small, fixed inputs (compared as canonical XML)."""
 
 from conftest import cube_animation
-
 from converter.convert import convert_animation
 from converter.options import ConversionOptions
 

@@ -24,11 +24,11 @@ FDP = ROOT / "samples" / "face.fdp.json"
 STREAMS = ("anger", "beg", "disgust", "fear", "happy-for", "hate", "joy", "pride")
 
 
-def test_cli_writes_a_zip_next_to_the_input(sample_path, shared_data, tmp_path, capsys):
+def test_cli_writes_a_zip_next_to_the_input(sample_path, small_data, tmp_path, capsys):
     face = tmp_path / "face.glb"
     shutil.copy(sample_path, face)
     code = main(["convert", str(face), "--to", "fap2d", "--size", "192", "-q",
-                 "--fap", str(shared_data / "mpeg4/xface/anger.fap"), "--fdp", str(FDP)])
+                 "--fap", str(small_data / "mpeg4/xface/anger.fap"), "--fdp", str(FDP)])
     assert code == 0, capsys.readouterr().err
     out = tmp_path / "face.zip"
     assert out.is_file() and "face.zip" in capsys.readouterr().out
@@ -42,8 +42,8 @@ def test_cli_writes_a_zip_next_to_the_input(sample_path, shared_data, tmp_path, 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", STREAMS)
-def test_every_xface_stream_makes_a_valid_package(name, sample_face, shared_data):
-    options = ConversionOptions(to="fap2d", size=128, fap=str(shared_data / f"mpeg4/xface/{name}.fap"), fdp=str(FDP))
+def test_every_xface_stream_makes_a_valid_package(name, sample_face, small_data):
+    options = ConversionOptions(to="fap2d", size=128, fap=str(small_data / f"mpeg4/xface/{name}.fap"), fdp=str(FDP))
     report = Report()
     result = fap2d.convert(sample_face, options, report)
     assert result.extension == ".zip" and result.media_type == "application/zip"
@@ -85,7 +85,10 @@ def test_jaw_open_moves_the_chin_down_like_the_3d_engine(joy_package, sample_fac
     assert np.abs(xy[k] - want).max() < 0.3
     # And the drawn chin goes lower: the texture around the chin point is now found where the table put it.
     frame = fap2d_render.render_frame(pkg, v)
-    patch = lambda img, p: img[int(p[1]) - 3:int(p[1]) + 4, int(p[0]) - 3:int(p[0]) + 4].astype(float)  # noqa: E731
+
+    def patch(img, p):
+        return img[int(p[1]) - 3:int(p[1]) + 4, int(p[0]) - 3:int(p[0]) + 4].astype(float)
+
     moved_diff = np.abs(patch(frame, xy[k]) - patch(pkg.portrait, chin)).mean()
     static_diff = np.abs(patch(pkg.portrait, xy[k]) - patch(pkg.portrait, chin)).mean()
     assert moved_diff < static_diff / 2, (moved_diff, static_diff)
@@ -100,8 +103,8 @@ def test_sample_mouth_layer_comes_from_its_teeth(joy_package):
 
 
 @pytest.mark.parametrize("case", ["no-fap", "no-fdp", "missing-fap", "malformed", "wrong-fdp"])
-def test_bad_input_is_one_clear_error_and_nothing_written(case, sample_path, shared_data, tmp_path, capsys):
-    fap = shared_data / "mpeg4/xface/joy.fap"
+def test_bad_input_is_one_clear_error_and_nothing_written(case, sample_path, small_data, tmp_path, capsys):
+    fap = small_data / "mpeg4/xface/joy.fap"
     args = ["convert", str(sample_path), "--to", "fap2d", "--size", "64", "-q", "-o", str(tmp_path / "out.zip")]
     if case == "no-fap":
         args += ["--fdp", str(FDP)]
@@ -133,8 +136,8 @@ def test_library_raises_input_error_without_stream(sample_face):
         fap2d.convert(sample_face, ConversionOptions(to="fap2d", fdp=str(FDP)), Report())
 
 
-def test_fps_option_resamples_the_stream(sample_face, shared_data):
-    fap = shared_data / "mpeg4/xface/joy.fap"
+def test_fps_option_resamples_the_stream(sample_face, small_data):
+    fap = small_data / "mpeg4/xface/joy.fap"
     options = ConversionOptions(to="fap2d", size=64, fps=50, fap=str(fap), fdp=str(FDP))
     pkg = fap2d_render.load_package(fap2d.convert(sample_face, options, Report()).data)
     assert pkg.manifest["stream"]["fps"] == 50 and pkg.n_frames == 216

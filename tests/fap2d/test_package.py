@@ -102,9 +102,9 @@ def test_neutral_frame_equals_portrait(synthetic_package):
     assert inside.mean() > 0.3
     assert np.array_equal(frame[inside], pkg.portrait[inside])
     # On the anti-aliased silhouette the mesh layer adds to the portrait's coverage, never changes colour much.
-    from player import flatten
-
     from scipy.ndimage import binary_dilation
+
+    from player import flatten
 
     diff = np.abs(flatten(frame) - flatten(pkg.portrait)).max(axis=-1)
     edge = binary_dilation((pkg.portrait[..., 3] > 0) & (pkg.portrait[..., 3] < 255))
@@ -121,7 +121,10 @@ def test_jaw_open_moves_chin_down(synthetic_package):
     assert xy[k, 1] - chin[1] > 5.0 and abs(xy[k, 0] - chin[0]) < 0.5
     # The drawn chin goes lower: the silhouette's bottom under the mouth moves down.
     col = int(round(chin[0]))
-    bottom = lambda img: np.flatnonzero(img[:, col, 3] > 128).max()  # noqa: E731
+
+    def bottom(img):
+        return np.flatnonzero(img[:, col, 3] > 128).max()
+
     assert bottom(fap2d_render.render_frame(pkg, v)) - bottom(pkg.portrait) > 5
     # Opening the jaw shows the mouth layer between the lips.
     mouth = np.array(pkg.manifest["feature_points"]["2.3"])

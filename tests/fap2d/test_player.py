@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from player import canvas_rgba, flatten, player_frame, player_page, player_values
 from skimage.metrics import structural_similarity
 
 from converter import fap2d_render
+from player import canvas_rgba, flatten, player_frame, player_page, player_values
 
 # Same-frame SSIM threshold. What differs between the two renderers is only how triangle edges are
 # anti-aliased (Skia's coverage-based clip vs the reference's pixel-centre rule) and Skia's bilinear filter vs

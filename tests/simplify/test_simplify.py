@@ -12,7 +12,7 @@ from verify.ictface import ict_face
 
 
 @pytest.fixture(scope="module")
-def face():
+def face(shared_data):  # the ICT head
     return ict_face(16, front=3.0)
 
 

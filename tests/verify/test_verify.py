@@ -65,7 +65,7 @@ def test_flicker_really_flickers():
 
 
 @pytest.fixture(scope="module")
-def ict_sheet():
+def ict_sheet(shared_data):  # the ICT head
     from converter import extract
 
     anim = ict_face(20, front=2.0, stride=3)

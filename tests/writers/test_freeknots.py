@@ -1,7 +1,6 @@
 """Free-knot keys: the bound holds where active, fewer keys than sampled keys, still tracks stay two equal keys."""
 
 import numpy as np
-import pytest
 
 from converter import freeknots, parallel
 from converter import keyframes as kf
