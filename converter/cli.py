@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+from converter.bundled import sample_path
 from converter.errors import FacesvgError
 from converter.userfiles import check_output
 
@@ -81,7 +82,15 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
     options = options_from_args(args)
     suffix = ".zip" if options.to == "fap2d" else (".svgz" if options.svgz else ".svg")
-    out = check_output(args.output if args.output else Path(args.input).with_suffix(suffix))
+    if args.sample:  # the bundled face; the default output goes to the working folder, not beside the sample
+        if args.input:
+            raise_input("give either an input file or --sample, not both.")
+        args.input, default_out = str(sample_path()), Path("face").with_suffix(suffix)
+    elif not args.input:
+        raise_input("give the input file to convert (or --sample for the bundled face).")
+    else:
+        default_out = Path(args.input).with_suffix(suffix)
+    out = check_output(args.output if args.output else default_out)
     result = convert(args.input, options, progress=ProgressBar(not args.quiet and sys.stderr.isatty() or args.progress),
                      cache=args.cache)
     write_atomic(out, result.data)
@@ -127,7 +136,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("convert", help="convert an animation to SVG (or another 2D output)")
-    p.add_argument("input", help="glTF/GLB, zip of OBJ frames, or OBJ with --cache")
+    p.add_argument("input", nargs="?", help="glTF/GLB, zip of OBJ frames, or OBJ with --cache")
+    p.add_argument("--sample", action="store_true", help="convert the bundled sample face instead of an input file")
     p.add_argument("-o", "--output", help="output file (default: input name with .svg)")
     p.add_argument("--cache", help="PC2 or MDD point cache for an OBJ input")
     p.add_argument("--report", help="also write the Report as JSON to this file")
