@@ -50,10 +50,14 @@ def small_data() -> Path:
 
 
 def pytest_collection_modifyitems(config, items):
-    # A test that asks for the full data sets is a `shared` test, so `-m "not shared"` deselects it.
+    # A test that asks for the full data sets is a `shared` test and one that drives Chromium a `browser` test,
+    # whether or not it carries the marker, so `-m "not shared"` and `make test-fast` deselect them.
     for item in items:
-        if "shared_data" in getattr(item, "fixturenames", ()):
+        names = getattr(item, "fixturenames", ())
+        if "shared_data" in names:
             item.add_marker(pytest.mark.shared)
+        if "browser" in names and not item.get_closest_marker("browser"):
+            item.add_marker(pytest.mark.browser)
 
 
 def pytest_runtest_setup(item):
