@@ -58,6 +58,11 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.shared)
         if "browser" in names and not item.get_closest_marker("browser"):
             item.add_marker(pytest.mark.browser)
+        # The web tests run on both queue backends; the RQ run (redis-server, a worker process, a forked work
+        # horse per job) repeats the embedded run's checks and costs several times more, so it is `slow`.
+        callspec = getattr(item, "callspec", None)
+        if callspec is not None and callspec.params.get("app") == "rq":
+            item.add_marker(pytest.mark.slow)
 
 
 def pytest_runtest_setup(item):
