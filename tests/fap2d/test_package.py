@@ -40,6 +40,7 @@ def test_manifest_validates_and_arrays_fit(synthetic_package):
         jsonschema.validate(broken, schema)
 
 
+@pytest.mark.slow
 def test_package_is_deterministic(synthetic, synthetic_package, xface):
     anim, fdp, deform = synthetic
     stream = read_fap(xface / "joy.fap")

@@ -93,6 +93,7 @@ def _same_structure(built, committed, path: str = "") -> None:
         assert built == committed, (path, built, committed)
 
 
+@pytest.mark.slow
 def test_make_sample_is_deterministic_and_matches_the_committed_files(shared_data, sample_path, tmp_path):
     # Byte-for-byte within one environment; against the committed files, the same asset within float noise:
     # the bytes follow meshoptimizer's, numpy's and scipy's last bits, which are not pinned.

@@ -19,6 +19,7 @@ FAP = SMALL_DATA / "mpeg4" / "xface" / "joy.fap"
 FDP = ROOT / "samples" / "face.fdp.json"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("app", ["embedded"], indirect=True)
 def test_fap2d_package_job_embeds_the_player(client):
     if not (FAP.is_file() and FDP.is_file() and SAMPLE.is_file()):
@@ -45,6 +46,7 @@ def test_fap2d_package_job_embeds_the_player(client):
     assert job["result"]["frames"] == job["result"]["report"]["counts"]["frames"] > 12
 
 
+@pytest.mark.slow
 def test_cli_registers_serve_and_worker():
     from converter.cli import build_parser
 
