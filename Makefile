@@ -1,11 +1,12 @@
 # facesvg: `make run` sets up and converts the bundled sample (then serves the web UI); `make test` runs the tests.
+# `make test-fast` skips the tests marked slow or browser; `make lint` runs ruff (configured in pyproject.toml).
 PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 export PYOPENGL_PLATFORM := egl
 
-.PHONY: setup run convert test golden bench clean
+.PHONY: setup run convert test test-fast lint golden bench clean
 
 setup: $(STAMP)
 	@if command -v npm >/dev/null 2>&1 && ! [ tests/reference/node_modules/.package-lock.json -nt tests/reference/package-lock.json ]; then cd tests/reference && npm ci --no-audit --no-fund --silent; fi
@@ -28,6 +29,12 @@ run: convert
 
 test: setup
 	$(BIN)/python -m pytest -q
+
+test-fast: setup
+	$(BIN)/python -m pytest -q -m "not slow and not browser"
+
+lint: setup
+	$(BIN)/ruff check .
 
 golden: setup
 	$(BIN)/python -m pytest -q --update-golden tests

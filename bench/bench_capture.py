@@ -20,14 +20,14 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from bench.capture_like import capture_like, motion_stats  # noqa: E402
-from converter import extract, smoothing  # noqa: E402
-from converter.encode import freeknots  # noqa: E402
-from converter.encode.budget import viewbox_scale  # noqa: E402
-from converter.encode import keys as keyframes  # noqa: E402
-from converter.options import ConversionOptions, Report  # noqa: E402
-from converter.verify import verify_animation  # noqa: E402
-from converter.writers import svg_anim  # noqa: E402
+from bench.capture_like import capture_like, motion_stats
+from converter import extract, smoothing
+from converter.encode import freeknots
+from converter.encode.budget import viewbox_scale
+from converter.encode import keys as keyframes
+from converter.options import ConversionOptions, Report
+from converter.verify import verify_animation
+from converter.writers import svg_anim
 
 TITLE = "Captured motion: rigid factoring, size levers, default tolerance (issue 9)"
 OUT = ROOT / "bench" / "out"

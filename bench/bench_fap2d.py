@@ -76,8 +76,9 @@ def prerender_3d(anim, deform, stream, camera, picks):
 
 
 def ssim_rgba(a, b, box=None) -> float:
-    from player import flatten
     from skimage.metrics import structural_similarity
+
+    from player import flatten
 
     fa, fb = flatten(a), flatten(b)
     if box is not None:
@@ -224,8 +225,11 @@ def run() -> str:
     lines.append("")
     lines.append("| face, stream, 2D mesh | triangles | whole image | face box | face box, no head rotation | player vs Python reference |")
     lines.append("|---|---:|---:|---:|---:|---:|")
+
+    def f(s):
+        return f"{statistics.median(s):.3f} [{min(s):.3f}]"
+
     for label, n, a, bx, nh, r in rows:
-        f = lambda s: f"{statistics.median(s):.3f} [{min(s):.3f}]"  # noqa: E731
         lines.append(f"| {label} | {n:,} | {f(a)} | {f(bx)} | {f(nh)} | {f(r)} |")
     lines.append("")
     lines.append("### Sizes next to the chapter's Table 12.4 (PDA, sizes uncompressed)")
@@ -254,7 +258,7 @@ def run() -> str:
                 f"{sz['stream_deflated_bytes_per_s']:,.0f} | {len(pkg.files['portrait.png']):,} | "
                 f"{len(pkg.files['mouth.png']):,} | {len(pkg.files['manifest.json']):,} | {len(data):,} |")
 
-    for name, (stream, pkg, data) in packages.items():
+    for name, (_stream, pkg, data) in packages.items():
         lines.append(size_row(name, pkg, data))
     lines.append(size_row("joy, ICT all visible", full_pkg, full_zip))
     lines.append(size_row("joy, sample face all visible", s_pkg, s_zip))

@@ -15,10 +15,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench.faces import ict_bench_face  # noqa: E402
-from converter.formats import load  # noqa: E402
-from converter.formats.objseq import load_zip  # noqa: E402
-from converter.formats.pointcache import load_obj_cache  # noqa: E402
+from bench.faces import ict_bench_face
+from converter.formats import load
+from converter.formats.objseq import load_zip
+from converter.formats.pointcache import load_obj_cache
 
 TITLE = "Input formats: load times"
 REPEATS = 5

@@ -63,7 +63,7 @@ def bench_faces() -> list[tuple[str, object]]:
         out.append(("sample (samples/face.glb)", formats.load(sample)))
     try:
         sys.path.insert(0, str(ROOT / "bench"))
-        from faces import ict_bench_face  # noqa: PLC0415
+        from faces import ict_bench_face
 
         out.append(("ICT 5k face (bench/faces.py)", ict_bench_face()))
     except ImportError:
@@ -133,6 +133,7 @@ def timed_write(sheet, options, repeats: int = REPEATS) -> tuple[bytes, float, o
 def renders(browser, svg: bytes, ref: np.ndarray, label: str) -> dict[str, object]:
     """SSIM/PSNR in Chromium, resvg and Firefox, and crack pixels (Chromium, 1x and 2x)."""
     from PIL import Image
+
     from svgrender import chromium_frame
 
     out: dict[str, object] = {}
@@ -208,9 +209,9 @@ def run() -> str:
     from playwright.sync_api import sync_playwright
 
     from conftest import CHROMIUM_ARGS, chromium_path
-    from svgrender import chromium_frame
     from converter.extract import extract, fit_camera
     from converter.options import ConversionOptions
+    from svgrender import chromium_frame
 
     OUT.mkdir(parents=True, exist_ok=True)
     has_ff = bool(shutil.which("firefox-esr") or shutil.which("firefox"))

@@ -49,7 +49,7 @@ def influence_section(head, fdp, sample, sample_fdp) -> tuple[str, object]:
     for name, v, f, d in (("ICT FaceKit head", head.vertices, head.faces, fdp),
                           ("samples/face.glb", sample.frames[0], sample.faces, sample_fdp)):
         box, cpu = {}, []
-        times = _timed(lambda: box.update(t=build_tables(v, f, d)), 3, cpu)
+        times = _timed(lambda box=box, v=v, f=f, d=d: box.update(t=build_tables(v, f, d)), 3, cpu)
         t = box["t"]
         tables = tables or t
         nnz = sum(0 if e.ids is None else len(e.ids) for e in t.entries.values())
@@ -79,7 +79,7 @@ def speed_section(head, tables) -> str:
         values = read_fap(XFACE / f"{name}.fap").low_level()
         deform(head.vertices, tables, values)  # warm the cached sparse matrix
         cpu: list[float] = []
-        times = _timed(lambda: deform(head.vertices, tables, values), 9, cpu)
+        times = _timed(lambda values=values: deform(head.vertices, tables, values), 9, cpu)
         t = len(values)
         rows.append(f"| {name}.fap | {t} | {int(np.count_nonzero(values.any(0)))} | "
                     f"{t / statistics.median(times):,.0f} | {t / min(times):,.0f} | {t / statistics.median(cpu):,.0f} |")

@@ -7,7 +7,6 @@ import struct
 import time
 from pathlib import Path
 
-
 TITLE = "Spine: load, extract, write (issue 2)"
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "bench" / "out"

@@ -15,14 +15,14 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from bench.faces import _animated_face, chapter_face, face_region, ict_bench_face, ict_head  # noqa: E402
-from bench.order_measure import order_error, robust_order  # noqa: E402
-from converter import extract, formats  # noqa: E402
-from converter.encode import order  # noqa: E402
-from converter.convert import convert_animation  # noqa: E402
-from converter.options import ConversionOptions, Report  # noqa: E402
-from converter.verify import verify_animation  # noqa: E402
-from converter.writers import svg_anim  # noqa: E402
+from bench.faces import _animated_face, chapter_face, face_region, ict_bench_face, ict_head
+from bench.order_measure import order_error, robust_order
+from converter import extract, formats
+from converter.encode import order
+from converter.convert import convert_animation
+from converter.options import ConversionOptions, Report
+from converter.verify import verify_animation
+from converter.writers import svg_anim
 
 TITLE = "Small, exact animated SVG (issue 3)"
 SAMPLE = ROOT / "samples" / "face.glb"

@@ -34,10 +34,10 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from bench.faces import HEAD_PIVOT, ict_head  # noqa: E402
-from converter.animation import FaceAnimation  # noqa: E402
-from samples.ict_region import face_region, sphere_center  # noqa: E402
-from converter.formats.ictfacekit import PART_ORDER  # noqa: E402
+from bench.faces import HEAD_PIVOT, ict_head
+from converter.animation import FaceAnimation
+from samples.ict_region import face_region, sphere_center
+from converter.formats.ictfacekit import PART_ORDER
 
 FRAMES = 335
 FPS = 30.0

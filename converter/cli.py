@@ -10,8 +10,9 @@ import time
 from pathlib import Path
 
 from converter import formats
+from converter.bundled import sample_path
 from converter.convert import convert
-from converter.errors import FacesvgError
+from converter.errors import FacesvgError, InputError
 from converter.options import ConversionOptions, OptionField, option_fields
 from converter.outputs import choices, output_kind
 from converter.userfiles import check_output, write_atomic
@@ -71,7 +72,15 @@ def cmd_convert(args: argparse.Namespace) -> int:
     """facesvg convert INPUT -o OUT."""
     options = options_from_args(args)
     suffix = output_kind(options.to).file_for(options).extension
-    out = check_output(args.output if args.output else Path(args.input).with_suffix(suffix))
+    if args.sample:  # the bundled face; the default output goes to the working folder, not beside the sample
+        if args.input:
+            raise InputError("give either an input file or --sample, not both.")
+        args.input, default_out = str(sample_path()), Path("face").with_suffix(suffix)
+    elif not args.input:
+        raise InputError("give the input file to convert (or --sample for the bundled face).")
+    else:
+        default_out = Path(args.input).with_suffix(suffix)
+    out = check_output(args.output if args.output else default_out)
     result = convert(args.input, options, progress=ProgressBar(not args.quiet and sys.stderr.isatty() or args.progress),
                      cache=args.cache)
     write_atomic(out, result.data)
@@ -113,7 +122,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("convert", help="convert an animation to SVG (or another 2D output)")
-    p.add_argument("input", help="glTF/GLB, zip of OBJ frames, or OBJ with --cache")
+    p.add_argument("input", nargs="?", help="glTF/GLB, zip of OBJ frames, or OBJ with --cache")
+    p.add_argument("--sample", action="store_true", help="convert the bundled sample face instead of an input file")
     p.add_argument("-o", "--output", help="output file (default: the input name with the output kind's extension)")
     p.add_argument("--cache", help="PC2 or MDD point cache for an OBJ input")
     p.add_argument("--report", help="also write the Report as JSON to this file")

@@ -11,6 +11,7 @@ from typing import Any, Callable
 from converter import cloning, formats, mpeg4, simplify, smoothing
 from converter import extract as extraction
 from converter.animation import FaceAnimation
+from converter.blendshapes import drive_file
 from converter.errors import InputError
 from converter.mpeg4 import fat2d
 from converter.options import ConversionOptions, Progress, Report, no_progress

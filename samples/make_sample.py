@@ -21,10 +21,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from converter.animation import DEFAULT_PART_COLORS  # noqa: E402
-from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder, encode_filter  # noqa: E402
-from samples.ict_region import face_region, sphere_center  # noqa: E402
-from converter.formats.ictfacekit import IctHead, load_ict_head  # noqa: E402
+from converter.animation import DEFAULT_PART_COLORS
+from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder, encode_filter
+from samples.ict_region import face_region, sphere_center
+from converter.formats.ictfacekit import IctHead, load_ict_head
 
 EXPRESSIONS = ("mouthSmile_L", "mouthSmile_R", "jawOpen", "eyeBlink_L", "eyeBlink_R",
                "browInnerUp_L", "browInnerUp_R", "browOuterUp_L", "browOuterUp_R")

@@ -13,6 +13,8 @@ from flask import Flask, jsonify, render_template, request
 from flask_wtf.csrf import CSRFError, CSRFProtect
 from werkzeug.exceptions import HTTPException
 
+from converter.bundled import asset_dir, sample_path
+
 ROOT = Path(__file__).resolve().parents[1]
 csrf = CSRFProtect()
 
@@ -26,7 +28,7 @@ DEFAULTS = {
     "FACESVG_MAX_UNZIPPED_MB": 1024,  # zip inputs expanding beyond this are refused
     "FACESVG_PREVIEW_FRAMES": 48,  # 3D prerender frames per job (spread evenly)
     "FACESVG_JOB_TIMEOUT": 3600,  # RQ job timeout in seconds
-    "FACESVG_SAMPLE": str(ROOT / "samples" / "face.glb"),
+    "FACESVG_SAMPLE": str(sample_path()),
     "WTF_CSRF_TIME_LIMIT": None,  # tokens live as long as the session
 }
 ENV_KEYS = {  # FACESVG_* environment variables override defaults; explicit config overrides both
@@ -40,10 +42,12 @@ def create_app(config: dict | None = None) -> Flask:
     """Build the app: config from defaults, FACESVG_* environment and the given dict; start the job queue."""
     app = Flask(
         __name__,
-        template_folder=str(ROOT / "templates"),
-        static_folder=str(ROOT / "static"),
+        template_folder=str(asset_dir("webapp", "templates")),
+        static_folder=str(asset_dir("webapp", "static")),
+        # A checkout keeps its instance folder beside the code; an installed wheel uses Flask's default
+        # (sys.prefix/var/webapp-instance), never site-packages.
         instance_path=(config or {}).get("INSTANCE_PATH") or os.environ.get("FACESVG_INSTANCE")
-        or str(ROOT / "instance"),
+        or (str(ROOT / "instance") if (ROOT / "pyproject.toml").is_file() else None),
     )
     app.config.update(DEFAULTS)
     for key, cast in ENV_KEYS.items():

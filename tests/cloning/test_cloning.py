@@ -59,7 +59,8 @@ def test_example_based_accuracy_source_target_round_trip(data):
 
 def test_example_based_reproduces_key_models_exactly(data):
     p = pairs(data)
-    c = ExampleCloner.fit(KeyPairs(p.source_base, p.target_base, p.source, p.target, p.names, ("other",) * len(p.names)))
+    others = ("other",) * len(p.names)
+    c = ExampleCloner.fit(KeyPairs(p.source_base, p.target_base, p.source, p.target, p.names, others))
     out = c.apply(np.concatenate([p.source_base[None], p.source[:5]]).astype(np.float32))
     np.testing.assert_allclose(out[0], p.target_base, atol=1e-4)
     np.testing.assert_allclose(out[1:], p.target[:5], atol=2e-3)
@@ -213,7 +214,8 @@ def test_cli_clone_writes_glb(data, tmp_path):
     big = FaceAnimation(src.frames[:1] * np.float32(1.1), src.faces, src.part_ids, src.parts, 30.0, "big")
     (tmp_path / "big.glb").write_bytes(write_glb(big))
     out = tmp_path / "out.glb"
-    assert main(["clone", str(tmp_path / "src.glb"), str(tmp_path / "big.glb"), "--method", "frames", "-o", str(out)]) == 0
+    args = ["clone", str(tmp_path / "src.glb"), str(tmp_path / "big.glb"), "--method", "frames", "-o", str(out)]
+    assert main(args) == 0
     back = formats.load(out)
     expected = clone(formats.load(tmp_path / "src.glb"), formats.load(tmp_path / "big.glb"), "frames")
     np.testing.assert_allclose(back.frames, expected.frames, atol=1e-4)

@@ -13,6 +13,7 @@ def run(*args, cwd=None):
     return subprocess.run([*BIN, *map(str, args)], capture_output=True, text=True, cwd=cwd, timeout=600)
 
 
+@pytest.mark.slow
 def test_convert_sample_writes_svg_and_summary(sample_path, tmp_path):
     out = tmp_path / "face.svg"
     r = run("convert", sample_path, "-o", out, "--size", "128", "--end", "10", "--report", tmp_path / "r.json")
@@ -107,6 +108,7 @@ def test_still_frame_outside_the_animation(sample_path, tmp_path):
     assert r.returncode == 2 and "--frame 9999" in r.stderr and not out.exists()
 
 
+@pytest.mark.slow
 def test_single_obj_is_a_still_face(tmp_path):
     obj = tmp_path / "tri.obj"
     obj.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl skin\nf 1 2 3\n")
@@ -117,13 +119,13 @@ def test_single_obj_is_a_still_face(tmp_path):
 
 
 @pytest.mark.slow
-def test_convert_clones_onto_another_face(sample_path, shared_data, tmp_path):
+def test_convert_clones_onto_another_face(sample_path, small_data, tmp_path):
     """`convert --clone-target` runs the cloning stage: the SVG draws the target's triangles, animated."""
     import json
 
     from converter.verify import evaluate
 
-    target = shared_data / "mediapipe_canonical" / "canonical_face_model.obj"
+    target = small_data / "mediapipe_canonical" / "canonical_face_model.obj"
     out = tmp_path / "cloned.svg"
     r = run("convert", sample_path, "-o", out, "--size", "128", "--end", "40", "--clone-target", target,
             "--report", tmp_path / "r.json")

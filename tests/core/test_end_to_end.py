@@ -5,7 +5,6 @@ import re
 
 import numpy as np
 import pytest
-from svgrender import chromium_frame, iou
 
 from converter import formats, render
 from converter.animation import vertex_normals
@@ -13,6 +12,7 @@ from converter.camera import Camera
 from converter.convert import convert
 from converter.lighting import lambert
 from converter.options import ConversionOptions
+from svgrender import chromium_frame, iou
 
 
 def metadata(svg: bytes) -> dict:
@@ -51,6 +51,7 @@ def test_sample_silhouette_matches_prerender(browser, sample_path, artifacts):
     assert np.abs(a.astype(int) - b.astype(int)).sum() > 0
 
 
+@pytest.mark.slow
 def test_gltfpack_sample_every_part_visible_and_moving(tmp_path):
     """The gltfpack-style twin (quantized + meshopt, morph weights, head and eye rotations) converts fully."""
     from converter.verify import evaluate, verify_animation

@@ -1,7 +1,6 @@
 """Golden files guard the exact SVG we generate for small, fixed inputs (compared as canonical XML)."""
 
 from conftest import cube_animation
-
 from converter.convert import convert_animation
 from converter.options import ConversionOptions
 
@@ -25,3 +24,23 @@ def test_output_is_deterministic():
     a = convert_animation(cube_animation(5), ConversionOptions(size=64)).data
     b = convert_animation(cube_animation(5), ConversionOptions(size=64)).data
     assert a == b
+
+
+def test_golden_compare_allows_last_digit_noise_only():
+    from lxml import etree
+
+    from conftest import golden_mismatch
+
+    want = etree.fromstring(b'<svg><path id="f2" d="M1.25 3L4 5" fill="#a0b0c0"/>'
+                            b'<metadata>{"x":5.8724605}</metadata></svg>')
+
+    def differs(svg: bytes) -> bool:
+        return golden_mismatch(etree.fromstring(svg), want) is not None
+
+    assert not differs(b'<svg><path id="f2" d="M1.26 3L4 5" fill="#a0b0c0"/><metadata>{"x":5.8724606}</metadata></svg>')
+    assert differs(b'<svg><path id="f2" d="M1.27 3L4 5" fill="#a0b0c0"/><metadata>{"x":5.8724605}</metadata></svg>')
+    assert differs(b'<svg><path id="f3" d="M1.25 3L4 5" fill="#a0b0c0"/><metadata>{"x":5.8724605}</metadata></svg>')
+    assert differs(b'<svg><path id="f2" d="M1.25 3L4 5 6" fill="#a0b0c0"/><metadata>{"x":5.8724605}</metadata></svg>')
+    assert differs(b'<svg><path id="f2" d="M1.25 3C4 5" fill="#a0b0c0"/><metadata>{"x":5.8724605}</metadata></svg>')
+    assert differs(b'<svg><path id="f2" d="M1.25 3L4 5"/><metadata>{"x":5.8724605}</metadata></svg>')
+    assert differs(b'<svg><path id="f2" d="M1.25 3L4 5" fill="#a0b0c0"/><metadata>{"y":5.8724605}</metadata></svg>')

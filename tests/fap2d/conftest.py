@@ -18,12 +18,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # player.py, standin.p
 
 from standin import standin_deform, synthetic_face  # noqa: E402  (found through the line above)
 
-XFACE = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "mpeg4" / "xface"
+XFACE = Path(__file__).resolve().parents[1] / "data" / "mpeg4" / "xface"
 
 
 @pytest.fixture(scope="session")
-def xface(shared_data) -> Path:
-    return shared_data / "mpeg4" / "xface"
+def xface(small_data) -> Path:
+    return small_data / "mpeg4" / "xface"
 
 
 @pytest.fixture(scope="session")
@@ -34,10 +34,10 @@ def synthetic():
 
 
 @pytest.fixture(scope="session")
-def synthetic_package(synthetic, shared_data):
+def synthetic_package(synthetic, small_data):
     """(Package, zip bytes) of the synthetic face driven by Xface's joy.fap, 256 px."""
     anim, fdp, deform = synthetic
-    stream = read_fap(shared_data / "mpeg4" / "xface" / "joy.fap")
+    stream = read_fap(small_data / "mpeg4" / "xface" / "joy.fap")
     pkg = fap2d.package(fat2d.build(anim, fdp, stream, deform, ConversionOptions(to="fap2d", size=256)))
     return pkg, fap2d.package_zip(pkg)
 
@@ -49,8 +49,8 @@ def sample_face(sample_path):
 
 
 @pytest.fixture(scope="session")
-def joy_package(sample_face, shared_data) -> bytes:
+def joy_package(sample_face, small_data) -> bytes:
     """Zip of the sample face with Xface's joy.fap through convert_animation and the real MPEG-4 engine, 256 px."""
     fdp = Path(__file__).resolve().parents[2] / "samples" / "face.fdp.json"
-    options = ConversionOptions(to="fap2d", size=256, fap=str(shared_data / "mpeg4/xface/joy.fap"), fdp=str(fdp))
+    options = ConversionOptions(to="fap2d", size=256, fap=str(small_data / "mpeg4/xface/joy.fap"), fdp=str(fdp))
     return convert_animation(sample_face, options).data

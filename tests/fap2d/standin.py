@@ -81,7 +81,7 @@ def standin_deform(anim: FaceAnimation, fdp) -> callable:
     def deform(values: np.ndarray) -> np.ndarray:
         values = np.asarray(values, np.float64)
         out = v0[None] + np.einsum("kf,fv,fc->kvc", values * scale, weights, axes)
-        for fap, (part, key, axis) in eyes.items():
+        for fap, (part, _key, axis) in eyes.items():
             ids = np.array(fdp.parts.get(part, []), np.int64)
             if not ids.size:
                 continue

@@ -26,11 +26,11 @@ FDP = ROOT / "samples" / "face.fdp.json"
 STREAMS = ("anger", "beg", "disgust", "fear", "happy-for", "hate", "joy", "pride")
 
 
-def test_cli_writes_a_zip_next_to_the_input(sample_path, shared_data, tmp_path, capsys):
+def test_cli_writes_a_zip_next_to_the_input(sample_path, small_data, tmp_path, capsys):
     face = tmp_path / "face.glb"
     shutil.copy(sample_path, face)
     code = main(["convert", str(face), "--to", "fap2d", "--size", "192", "-q",
-                 "--fap", str(shared_data / "mpeg4/xface/anger.fap"), "--fdp", str(FDP)])
+                 "--fap", str(small_data / "mpeg4/xface/anger.fap"), "--fdp", str(FDP)])
     assert code == 0, capsys.readouterr().err
     out = tmp_path / "face.zip"
     assert out.is_file() and "face.zip" in capsys.readouterr().out
@@ -44,8 +44,8 @@ def test_cli_writes_a_zip_next_to_the_input(sample_path, shared_data, tmp_path, 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", STREAMS)
-def test_every_xface_stream_makes_a_valid_package(name, sample_face, shared_data):
-    options = ConversionOptions(to="fap2d", size=128, fap=str(shared_data / f"mpeg4/xface/{name}.fap"), fdp=str(FDP))
+def test_every_xface_stream_makes_a_valid_package(name, sample_face, small_data):
+    options = ConversionOptions(to="fap2d", size=128, fap=str(small_data / f"mpeg4/xface/{name}.fap"), fdp=str(FDP))
     result = convert_animation(sample_face, options)
     report = result.report
     assert result.extension == ".zip" and result.media_type == "application/zip"
@@ -100,8 +100,8 @@ def test_sample_mouth_layer_comes_from_its_teeth(joy_package):
 
 
 @pytest.mark.parametrize("case", ["no-fap", "no-fdp", "missing-fap", "malformed", "wrong-fdp"])
-def test_bad_input_is_one_clear_error_and_nothing_written(case, sample_path, shared_data, tmp_path, capsys):
-    fap = shared_data / "mpeg4/xface/joy.fap"
+def test_bad_input_is_one_clear_error_and_nothing_written(case, sample_path, small_data, tmp_path, capsys):
+    fap = small_data / "mpeg4/xface/joy.fap"
     args = ["convert", str(sample_path), "--to", "fap2d", "--size", "64", "-q", "-o", str(tmp_path / "out.zip")]
     if case == "no-fap":
         args += ["--fdp", str(FDP)]
@@ -133,8 +133,8 @@ def test_library_raises_input_error_without_stream(sample_face):
         convert_animation(sample_face, ConversionOptions(to="fap2d", fdp=str(FDP)))
 
 
-def test_fps_option_resamples_the_stream(sample_face, shared_data):
-    fap = shared_data / "mpeg4/xface/joy.fap"
+def test_fps_option_resamples_the_stream(sample_face, small_data):
+    fap = small_data / "mpeg4/xface/joy.fap"
     options = ConversionOptions(to="fap2d", size=64, fps=50, fap=str(fap), fdp=str(FDP))
     pkg = reference_render.load_package(convert_animation(sample_face, options).data)
     assert pkg.manifest["stream"]["fps"] == 50 and pkg.n_frames == 216

@@ -46,6 +46,7 @@ def test_manifest_validates_and_arrays_fit(synthetic_package):
         jsonschema.validate(broken, schema)
 
 
+@pytest.mark.slow
 def test_package_is_deterministic(synthetic, synthetic_package, xface):
     anim, fdp, deform = synthetic
     stream = read_fap(xface / "joy.fap")
@@ -123,7 +124,10 @@ def test_jaw_open_moves_chin_down(synthetic_package):
     assert xy[k, 1] - chin[1] > 5.0 and abs(xy[k, 0] - chin[0]) < 0.5
     # The drawn chin goes lower: the silhouette's bottom under the mouth moves down.
     col = int(round(chin[0]))
-    bottom = lambda img: np.flatnonzero(img[:, col, 3] > 128).max()  # noqa: E731
+
+    def bottom(img):
+        return np.flatnonzero(img[:, col, 3] > 128).max()
+
     assert bottom(reference_render.render_frame(pkg, v)) - bottom(pkg.portrait) > 5
     # Opening the jaw shows the mouth layer between the lips.
     mouth = np.array(pkg.manifest["feature_points"]["2.3"])

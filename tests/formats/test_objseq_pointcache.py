@@ -107,7 +107,8 @@ def pc2(frames: np.ndarray, rate: float = 1.0, start: float = 0.0) -> bytes:
 
 
 def mdd(frames: np.ndarray, times: np.ndarray) -> bytes:
-    return struct.pack(">ii", len(frames), frames.shape[1]) + times.astype(">f4").tobytes() + frames.astype(">f4").tobytes()
+    header = struct.pack(">ii", len(frames), frames.shape[1])
+    return header + times.astype(">f4").tobytes() + frames.astype(">f4").tobytes()
 
 
 def test_pc2_one_sample_per_frame_and_sample_rate():

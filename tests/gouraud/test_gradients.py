@@ -6,7 +6,12 @@ import numpy as np
 import pytest
 
 from converter.writers.gradients import (
-    LinearGradients, barycentric, exact_gradients, gradient_color, gradient_parameter, vertex_ramps,
+    LinearGradients,
+    barycentric,
+    exact_gradients,
+    gradient_color,
+    gradient_parameter,
+    vertex_ramps,
 )
 
 RNG = np.random.default_rng(4)

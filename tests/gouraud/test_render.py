@@ -35,15 +35,16 @@ FLAT_MARGIN = 0.1
 def subject():
     anim = ellipsoid(n_frames=3, subdivisions=2)
     sheet = extract(anim, fit_camera(anim, SIZE), reference_frames=(FRAME,))
-    stills = {s: (svg_anim.write if s == "flat" else svg_gouraud.write)(sheet, ConversionOptions(shading=s, frame=FRAME), Report())
-              for s in ("flat", "gouraud", "gouraud-chapter")}
+    stills = {s: (svg_anim.write if s == "flat" else svg_gouraud.write)(
+        sheet, ConversionOptions(shading=s, frame=FRAME), Report()) for s in ("flat", "gouraud", "gouraud-chapter")}
     return sheet, sheet.references[FRAME], stills
 
 
 def resvg(svg: bytes, zoom: float = 1.0) -> np.ndarray:
     import resvg_py
 
-    return np.asarray(Image.open(io.BytesIO(bytes(resvg_py.svg_to_bytes(svg_string=svg.decode(), zoom=zoom)))).convert("RGBA"))
+    png = bytes(resvg_py.svg_to_bytes(svg_string=svg.decode(), zoom=zoom))
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGBA"))
 
 
 def ssim(img: np.ndarray, ref: np.ndarray) -> float:

@@ -109,7 +109,8 @@ def test_still_gradients_are_the_sheets_vertex_colours(sheet):
     root, _, _ = write(sheet, shading="gouraud", frame=k)
     tris = triangles(root, None, sheet.n_frames)
     ids = np.array(sorted(tris))
-    want = exact_gradients(sheet.xy[k][sheet.faces[ids]].astype(float), sheet.vertex_rgb[k][sheet.faces[ids]].astype(float))
+    corners = sheet.faces[ids]
+    want = exact_gradients(sheet.xy[k][corners].astype(float), sheet.vertex_rgb[k][corners].astype(float))
     axis = np.array([tris[f]["axis"] for f in ids])
     colors = np.array([tris[f]["colors"] for f in ids])
     assert np.abs(axis - np.concatenate([want.start, want.end], axis=1)).max() <= 0.0051

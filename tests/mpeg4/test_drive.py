@@ -22,8 +22,8 @@ def sample(sample_path):
 
 
 @pytest.fixture(scope="module")
-def joy(shared_data):
-    return read_fap(shared_data / "mpeg4" / "xface" / "joy.fap")
+def joy(small_data):
+    return read_fap(small_data / "mpeg4" / "xface" / "joy.fap")
 
 
 def test_drive_sample_with_joy(sample, joy):
@@ -55,11 +55,11 @@ def test_drive_without_fdp_says_what_to_do(cube, joy):
         mpeg4.drive(cube, joy, None)
 
 
-def test_cli_convert_with_fap(shared_data, sample_path, tmp_path):
+def test_cli_convert_with_fap(small_data, sample_path, tmp_path):
     from converter.cli import main
 
     out = tmp_path / "joy.svg"
-    rc = main(["convert", str(sample_path), "--fap", str(shared_data / "mpeg4" / "xface" / "joy.fap"),
+    rc = main(["convert", str(sample_path), "--fap", str(small_data / "mpeg4" / "xface" / "joy.fap"),
                "--fdp", str(ROOT / "samples" / "face.fdp.json"), "--size", "96", "--end", "4", "-q", "-o", str(out)])
     assert rc == 0
     text = out.read_text()
@@ -98,7 +98,8 @@ def test_auto_on_ict_head_close_to_landmarks(shared_data):
     ref = ict_fdp(shared_data / "ict_facekit")
     fdp, report = auto_fdp(FaceAnimation(head.vertices[None], head.faces, head.part_ids, head.parts, 25, "ict"))
     v = head.vertices
-    err = {k: np.linalg.norm(v[fdp.points[k]] - v[ref.points[k]]) / ref.fapu["ES0"] for k in fdp.points if k in ref.points}
+    err = {k: np.linalg.norm(v[fdp.points[k]] - v[ref.points[k]]) / ref.fapu["ES0"]
+           for k in fdp.points if k in ref.points}
     assert np.median(list(err.values())) < 0.1
     assert max(e for k, e in err.items() if not k.startswith("6.")) < 0.35  # auto's tongue includes the gums
     assert "9.12" in report.missing and "10.x" in report.missing and "3.5" in report.found and "2.13" in report.found

@@ -14,8 +14,8 @@ STREAMS = ("anger", "beg", "disgust", "fear", "happy-for", "hate", "joy", "pride
 
 
 @pytest.fixture(scope="module")
-def xface(shared_data):
-    return shared_data / "mpeg4" / "xface"
+def xface(small_data):
+    return small_data / "mpeg4" / "xface"
 
 
 @pytest.mark.parametrize("name", STREAMS)
@@ -49,7 +49,7 @@ def _stream_text(n_frames=3, first=0, version="2.1", sep=" ", width=68, fap12=No
     for t in range(n_frames):
         bits = ["0"] * width
         vals = []
-        for k, count in (fap12 or {}).items():
+        for k in fap12 or {}:
             bits[k - 1] = "1"
         if fap12:
             for k in sorted(fap12):

@@ -24,8 +24,8 @@ def test_fap_table_facts():
     assert s[2] == 1.0 and s[5] == 2.0 and s[22] == 1e-5 and s[0] == 0
 
 
-def test_xface_fdp_import(shared_data):
-    fdp = load_fdp(shared_data / "mpeg4" / "xface" / "alice.fdp")
+def test_xface_fdp_import(small_data):
+    fdp = load_fdp(small_data / "mpeg4" / "xface" / "alice.fdp")
     assert fdp.fapu == {"IRISD0": 16.0, "ES0": 69.0, "ENS0": 51.0, "MNS0": 30.0, "MW0": 50.0}
     x = fdp.extra["xface"]
     assert len(x["submesh"]) == 33  # 35 listings; 2.1 and one more are listed for two submeshes
@@ -126,17 +126,19 @@ def test_ict_fdp_matches_bundled_and_is_sane(shared_data):
     assert set(fdp.points) <= set(FEATURE_POINTS) and len(fdp.points) >= 60
     _mirror_ok(fdp, v, 0.05)
     p = fdp.point_positions(v)
-    assert p["2.1"][1] < p["8.2"][1] < p["2.3"][1] <= p["2.2"][1] < p["8.1"][1] < p["9.15"][1] < p["3.5"][1] < p["4.3"][1]
+    assert (p["2.1"][1] < p["8.2"][1] < p["2.3"][1] <= p["2.2"][1] < p["8.1"][1] < p["9.15"][1] < p["3.5"][1]
+            < p["4.3"][1])
     assert 0.6 < fdp.fapu["IRISD0"] < 1.5 and 5 < fdp.fapu["ES0"] < 8 and 4 < fdp.fapu["MW0"] < 6  # cm
     assert set(fdp.parts) == {"left_eye", "right_eye", "upper_teeth", "lower_teeth", "tongue"}
-    assert v[fdp.parts["left_eye"]][:, 0].min() > 0 and v[fdp.parts["lower_teeth"]][:, 1].mean() < v[fdp.parts["upper_teeth"]][:, 1].mean()
+    assert v[fdp.parts["left_eye"]][:, 0].min() > 0
+    assert v[fdp.parts["lower_teeth"]][:, 1].mean() < v[fdp.parts["upper_teeth"]][:, 1].mean()
 
 
-def test_mediapipe_fdp(shared_data):
+def test_mediapipe_fdp(small_data):
     from converter.formats.obj import parse_obj
     from converter.mpeg4.facepoints import mediapipe_fdp
 
-    obj = shared_data / "mediapipe_canonical" / "face_model_with_iris.obj"
+    obj = small_data / "mediapipe_canonical" / "face_model_with_iris.obj"
     fdp = mediapipe_fdp(obj)
     assert fdp_to_json(fdp) == (ROOT / "samples" / "mediapipe.fdp.json").read_text()
     v = parse_obj(obj.read_text())[0]

@@ -66,19 +66,19 @@ def test_reduce_and_expand():
         loa.reduce(s, "ultra")
 
 
-def test_sizes_shrink_on_xface_streams(shared_data):
-    for path in sorted((shared_data / "mpeg4" / "xface").glob("*.fap")):
+def test_sizes_shrink_on_xface_streams(small_data):
+    for path in sorted((small_data / "mpeg4" / "xface").glob("*.fap")):
         s = read_fap(path)
         sizes = [len(write_fap(loa.reduce(s, level))) for level in loa.LEVELS]
         assert sizes[0] > sizes[1] > sizes[2] > sizes[3], path.name
         assert 0.4 < sizes[3] / sizes[0] < 0.8
 
 
-def test_cli_fap_loa(shared_data, tmp_path, capsys):
+def test_cli_fap_loa(small_data, tmp_path, capsys):
     from converter.cli import main
 
     out = tmp_path / "joy_low.fap"
-    assert main(["fap-loa", str(shared_data / "mpeg4" / "xface" / "joy.fap"), "--level", "low", "-o", str(out)]) == 0
+    assert main(["fap-loa", str(small_data / "mpeg4" / "xface" / "joy.fap"), "--level", "low", "-o", str(out)]) == 0
     s = read_fap(out)
     assert s.extra["loa"] == "low" and s.n_frames == 108
     assert set(np.flatnonzero(s.mask.any(0)) + 1) <= {g[0] for g in loa.groups("low")}

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from bench.capture_like import capture_like, motion_stats
+
+pytestmark = [pytest.mark.shared, pytest.mark.slow]  # built from the ICT head in ../shared/data
 
 
 def test_deterministic_and_seeded():

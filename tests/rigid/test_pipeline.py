@@ -70,7 +70,8 @@ def test_chromium_draws_rigid_like_plain(browser, outputs, artifacts):
         b = _over_white(chromium_frame(browser, outputs[False].data, t, 192, 192))
         diff = np.abs(a - b).max(axis=2)
         if (diff > 140).mean() > 0.0005:
-            Image.fromarray(np.concatenate([a, b], axis=1).round().astype(np.uint8)).save(artifacts / f"rigid_vs_plain_{k}.png")
+            side_by_side = np.concatenate([a, b], axis=1).round().astype(np.uint8)
+            Image.fromarray(side_by_side).save(artifacts / f"rigid_vs_plain_{k}.png")
         # Both are within 0.25 px of the exact projection, so at most 0.5 px apart: an anti-aliased edge pixel
         # may differ by up to half the contrast (128 levels against the transparent background), no more.
         assert (diff > 140).mean() < 0.0005, k

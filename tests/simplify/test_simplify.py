@@ -12,7 +12,7 @@ from verify.ictface import ict_face
 
 
 @pytest.fixture(scope="module")
-def face():
+def face(shared_data):  # the ICT head
     return ict_face(16, front=3.0)
 
 
@@ -30,6 +30,7 @@ def test_budget_keeps_a_vertex_subset_and_every_frame(face):
     assert report.counts["budget_dropped_never_facing"] > 0
 
 
+@pytest.mark.slow
 def test_tighter_budget_deviates_more(face):
     opts = ConversionOptions
     loose, tight = Report(), Report()
@@ -57,6 +58,7 @@ def test_simplify_with_attributes_binding_works_where_the_wrapper_does_not():
     assert 0 < len(out) <= 60 and out.max() < len(v)
 
 
+@pytest.mark.slow
 def test_converted_budget_output_verifies(face):
     result = convert_animation(face, ConversionOptions(size=128, max_triangles=800, occlusion=False))
     assert result.report.counts["budget_triangles"] <= 800

@@ -65,7 +65,7 @@ def test_flicker_really_flickers():
 
 
 @pytest.fixture(scope="module")
-def ict_sheet():
+def ict_sheet(shared_data):  # the ICT head
     from converter import extract
 
     anim = ict_face(20, front=2.0, stride=3)
@@ -80,6 +80,7 @@ def sample_sheet(sample_path):
     return anim, extract.extract(anim, extract.fit_camera(anim, 256))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("tolerance", [0.1, 0.25, 1.0])
 @pytest.mark.parametrize("which", ["ict", "sample"])
 def test_faces_within_tolerance(which, tolerance, ict_sheet, request):
@@ -90,6 +91,7 @@ def test_faces_within_tolerance(which, tolerance, ict_sheet, request):
     assert v.paths > 500 and v.frames == anim.n_frames
 
 
+@pytest.mark.slow
 def test_sample_through_cli_svgz(sample_path, tmp_path):
     out = tmp_path / "face.svgz"
     r = subprocess.run([*CLI, "convert", sample_path, "-o", out, "--size", "128", "--tolerance", "0.1", "--svgz",
@@ -129,6 +131,7 @@ def test_verifier_catches_wrong_visibility():
     assert v.visibility_mismatches > 0 and v.mismatch_frames > 0 and not v.ok
 
 
+@pytest.mark.slow
 def test_cli_verify_fails_on_corrupt_file_and_refuses_garbage(sample_path, tmp_path):
     out = tmp_path / "face.svg"
     r = subprocess.run([*CLI, "convert", sample_path, "-o", out, "--size", "128", "--end", "12", "-q"],

@@ -12,17 +12,18 @@ from pathlib import Path
 
 import pytest
 
-from conftest import ROOT, SAMPLE, SHARED_DATA
+from conftest import ROOT, SAMPLE, SMALL_DATA
 from web.conftest import wait_job
 
-FAP = SHARED_DATA / "mpeg4" / "xface" / "joy.fap"
+FAP = SMALL_DATA / "mpeg4" / "xface" / "joy.fap"
 FDP = ROOT / "samples" / "face.fdp.json"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("app", ["embedded"], indirect=True)
 def test_fap2d_package_job_embeds_the_player(client):
     if not (FAP.is_file() and FDP.is_file() and SAMPLE.is_file()):
-        pytest.fail("the fap2d test needs samples/face.glb, samples/face.fdp.json and the shared Xface FAP files")
+        pytest.fail("the fap2d test needs samples/face.glb, samples/face.fdp.json and tests/data's Xface FAP files")
     r = client.post("/api/v1/jobs", data={
         "file": (io.BytesIO(SAMPLE.read_bytes()), "face.glb"), "to": "fap2d", "size": "128", "end": "12",
         "fap": (io.BytesIO(FAP.read_bytes()), "joy.fap"), "fdp": (io.BytesIO(FDP.read_bytes()), "face.fdp.json"),
@@ -45,6 +46,7 @@ def test_fap2d_package_job_embeds_the_player(client):
     assert job["result"]["frames"] == job["result"]["report"]["counts"]["frames"] > 12
 
 
+@pytest.mark.slow
 def test_cli_registers_serve_and_worker():
     from converter.cli import build_parser
 

@@ -20,6 +20,7 @@ def _stored_job(queue, job_id: str, state: str, attempts: int) -> None:
         assert queue.store.transition(job_id, ("queued",), state=RUNNING, attempts=attempts, progress=0.4)
 
 
+@pytest.mark.slow
 def test_restart_keeps_jobs_and_recovers_interrupted_ones(tmp_path):
     first = make_app(tmp_path, "embedded", FACESVG_EXECUTOR="process", FACESVG_WORKERS=1)
     c = first.test_client()

@@ -2,11 +2,11 @@
 
 import numpy as np
 import pytest
-from svgrender import chromium_frame, iou
 
 from converter import extract, formats, render
 from converter.options import ConversionOptions, Report
 from converter.writers import svg_anim
+from svgrender import chromium_frame, iou
 
 
 def pyrender_flat(anim, sheet, k):

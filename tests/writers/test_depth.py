@@ -26,6 +26,7 @@ def scene():
     return anim, extract.extract(anim, extract.fit_camera(anim, 96, yaw=5.0), occlusion=False)
 
 
+@pytest.mark.slow
 def test_order_error_sees_a_wrong_fixed_order(scene):
     anim, sheet = scene
     back_first = order.DrawList(np.array([2, 3, 0, 1], np.int32), sheet.visible[:, [2, 3, 0, 1]])

@@ -1,7 +1,6 @@
 """Free-knot keys: the bound holds where active, fewer keys than sampled keys, still tracks stay two equal keys."""
 
 import numpy as np
-import pytest
 
 from converter.encode import freeknots, parallel
 from converter.encode import keys as kf

@@ -4,9 +4,9 @@ import gzip
 import re
 
 import numpy as np
-from conftest import cube_animation
 from lxml import etree
 
+from conftest import cube_animation
 from converter import extract
 from converter.animation import FaceAnimation, Part
 from converter.convert import convert_animation
