@@ -23,8 +23,8 @@ if str(ROOT) not in sys.path:
 from bench.capture_like import capture_like, motion_stats
 from converter import extract, smoothing
 from converter.encode import freeknots
-from converter.encode.budget import viewbox_scale
 from converter.encode import keys as keyframes
+from converter.encode.budget import viewbox_scale
 from converter.options import ConversionOptions, Report
 from converter.verify import verify_animation
 from converter.writers import svg_anim

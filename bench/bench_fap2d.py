@@ -122,11 +122,10 @@ def sample_face():
 def fidelity(b, label, anim, deform, stream, pkg, data) -> tuple:
     """SSIM of the player's frames vs the 3D prerender (with and without head rotation) and vs the reference."""
     from PIL import Image
-
-    from player import player_frame, player_page
     from reference_render import load_package, render_stream_frame
 
     from converter.camera import Camera
+    from player import player_frame, player_page
 
     ref = load_package(data)
     camera = Camera.from_json(pkg.manifest["camera"])

@@ -30,8 +30,8 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 def ict_face_fallback(triangles: int = 5000, n_frames: int = 24):
     """A ~5,000-triangle ICT face (smile, jaw open, a little yaw), used until bench/faces.py exists."""
     from converter.animation import FaceAnimation, Part
-    from samples.ict_region import face_region
     from converter.formats.ictfacekit import PART_ORDER, load_ict_head
+    from samples.ict_region import face_region
 
     head = load_ict_head(ROOT.parent / "shared" / "data" / "ict_facekit")
     pieces = face_region(head, triangles)

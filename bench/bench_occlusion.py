@@ -24,14 +24,14 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from bench.capture_like import capture_like  # noqa: E402
-from bench.faces import ict_head  # noqa: E402
-from bench.legacy_occlusion import legacy_triangle_ids  # noqa: E402
-from converter import idpass, render  # noqa: E402
-from converter.animation import FaceAnimation  # noqa: E402
-from converter.camera import Camera  # noqa: E402
-from converter.extract import cull, fit_camera  # noqa: E402
-from converter.formats import load  # noqa: E402
+from bench.capture_like import capture_like
+from bench.faces import ict_head
+from bench.legacy_occlusion import legacy_triangle_ids
+from converter import idpass, render
+from converter.animation import FaceAnimation
+from converter.camera import Camera
+from converter.extract import cull, fit_camera
+from converter.formats import load
 
 TITLE = "Occlusion pass: one integer-id render per frame, no visible triangle dropped"
 SAMPLE = ROOT / "samples" / "face.glb"

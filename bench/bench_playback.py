@@ -17,10 +17,10 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from bench.capture_like import capture_like  # noqa: E402 - after the path setup above
-from bench.playback import chromium, host_page, measure, serve  # noqa: E402
-from converter.convert import convert, convert_animation  # noqa: E402
-from converter.options import ConversionOptions  # noqa: E402
+from bench.capture_like import capture_like
+from bench.playback import chromium, host_page, measure, serve
+from converter.convert import convert, convert_animation
+from converter.options import ConversionOptions
 
 TITLE = "Playback in Chromium under CPU throttling (issue 18)"
 SAMPLE = ROOT / "samples" / "face.glb"

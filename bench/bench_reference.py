@@ -10,14 +10,14 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from playwright.sync_api import sync_playwright  # noqa: E402
+from playwright.sync_api import sync_playwright
 
-from converter.convert import convert  # noqa: E402
-from converter.errors import InputError  # noqa: E402
-from converter.formats.gltf import parse_container  # noqa: E402
-from converter.options import ConversionOptions  # noqa: E402
-from tests.conftest import CHROMIUM_ARGS, SAMPLE, SHARED_DATA, chromium_path  # noqa: E402
-from tests.reference import threejs  # noqa: E402
+from converter.convert import convert
+from converter.errors import InputError
+from converter.formats.gltf import parse_container
+from converter.options import ConversionOptions
+from tests.conftest import CHROMIUM_ARGS, SAMPLE, SHARED_DATA, chromium_path
+from tests.reference import threejs
 
 TITLE = "Real files against three.js"
 

@@ -18,8 +18,8 @@ if str(ROOT) not in sys.path:
 from bench.faces import _animated_face, chapter_face, face_region, ict_bench_face, ict_head
 from bench.order_measure import order_error, robust_order
 from converter import extract, formats
-from converter.encode import order
 from converter.convert import convert_animation
+from converter.encode import order
 from converter.options import ConversionOptions, Report
 from converter.verify import verify_animation
 from converter.writers import svg_anim

@@ -19,9 +19,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from converter import blendshapes  # noqa: E402
-from converter.formats.morphs import load_morph_face  # noqa: E402
-from converter.formats.weights import read_weights  # noqa: E402
+from converter import blendshapes
+from converter.formats.morphs import load_morph_face
+from converter.formats.weights import read_weights
 
 TITLE = "ARKit weight captures on the ICT head"
 ICT = ROOT.parent / "shared" / "data" / "ict_facekit"

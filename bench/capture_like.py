@@ -36,8 +36,8 @@ if str(ROOT) not in sys.path:
 
 from bench.faces import HEAD_PIVOT, ict_head
 from converter.animation import FaceAnimation
-from samples.ict_region import face_region, sphere_center
 from converter.formats.ictfacekit import PART_ORDER
+from samples.ict_region import face_region, sphere_center
 
 FRAMES = 335
 FPS = 30.0

@@ -15,8 +15,8 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from converter.animation import FaceAnimation
-from samples.ict_region import NARROW_FACE_VERTICES, Piece, face_region
 from converter.formats.ictfacekit import PART_ORDER, IctHead, load_ict_head
+from samples.ict_region import NARROW_FACE_VERTICES, Piece, face_region
 
 ICT_FOLDER = ROOT.parent / "shared" / "data" / "ict_facekit"
 HEAD_PIVOT = np.array([0.0, -6.0, 0.0])  # the neck, in ICT cm

@@ -15,8 +15,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from converter import render  # noqa: E402
-from converter.camera import Camera  # noqa: E402
+from converter import render
+from converter.camera import Camera
 
 
 def legacy_triangle_ids(frames: np.ndarray, faces: np.ndarray, camera: Camera) -> np.ndarray:

@@ -93,11 +93,11 @@ class FaceAnimation:
         """Seconds the animation lasts: frame k shows from k/fps to (k+1)/fps."""
         return self.n_frames / self.fps
 
-    def with_frames(self, frames: np.ndarray, **changes) -> "FaceAnimation":
+    def with_frames(self, frames: np.ndarray, **changes) -> FaceAnimation:
         """A copy with other vertex positions (same topology) and any other fields changed."""
         return replace(self, frames=frames, **changes)
 
-    def sliced(self, start: int = 0, end: int | None = None) -> "FaceAnimation":
+    def sliced(self, start: int = 0, end: int | None = None) -> FaceAnimation:
         """Frames start..end-1 (clamped); raises InputError when the range is empty."""
         end = self.n_frames if end is None else end
         if not (0 <= start < end <= self.n_frames):

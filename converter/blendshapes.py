@@ -21,9 +21,9 @@ import numpy as np
 
 from converter.animation import FaceAnimation
 from converter.errors import InputError
-from converter.mpeg4.tables import sphere_center
 from converter.formats.morphs import MorphFace, load_morph_face
 from converter.formats.weights import WeightTrack, read_weights
+from converter.mpeg4.tables import sphere_center
 from converter.options import Progress, no_progress
 
 BLOCK_FLOATS = 1 << 24  # floats per block of frames (64 MB of float32 intermediates)
@@ -34,7 +34,7 @@ _PREFIX = re.compile(r"^(?:arkit|bs|blendshapes?|shapes?|morphs?)[_\-\s]+", re.I
 
 
 def normalise(name: str) -> tuple[str, str]:
-    """(base, side) of a blendshape name: 'EyeBlinkLeft', 'eyeBlink_L', 'blendShape1.eyeBlink.L' -> ('eyeblink', 'L')."""
+    """(base, side) of a blendshape name: 'eyeBlink_L', 'blendShape1.eyeBlink.L' -> ('eyeblink', 'L')."""
     s = name.strip()
     side = ""
     m = _SIDE.search(s)

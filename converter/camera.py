@@ -28,7 +28,7 @@ class Camera(NamedTuple):
         fov: float = 30.0,
         ortho: bool = False,
         margin: float = 0.04,
-    ) -> "Camera":
+    ) -> Camera:
         """A camera that frames every vertex of every frame, seen from yaw/pitch degrees off the front (+z)."""
         if not (16 <= size <= 8192):
             raise InputError(f"size must be between 16 and 8192 pixels, got {size}.")
@@ -86,7 +86,7 @@ class Camera(NamedTuple):
         }
 
     @staticmethod
-    def from_json(data: dict) -> "Camera":
+    def from_json(data: dict) -> Camera:
         """Inverse of to_json."""
         return Camera(
             np.array(data["view"], np.float64),

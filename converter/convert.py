@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import gzip
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from converter import cloning, formats, mpeg4, simplify, smoothing
 from converter import extract as extraction
@@ -38,7 +39,9 @@ def load(path: str | Path, options: ConversionOptions, cache: str | Path | None 
     return formats.load(path, fps=options.fps, cache=cache, animation=options.animation)
 
 
-def prepare(anim: FaceAnimation, options: ConversionOptions, report: Report, progress: Progress = no_progress) -> FaceAnimation:
+def prepare(
+    anim: FaceAnimation, options: ConversionOptions, report: Report, progress: Progress = no_progress
+) -> FaceAnimation:
     """The optional 3D stages in order: FAP driving, frame range, cloning, triangle budget."""
     if "weights" in anim.extras:  # what the weight capture matched, from load()
         report.counts.update(anim.extras["weights"]["counts"])

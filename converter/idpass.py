@@ -98,7 +98,9 @@ class IdRenderer:
             gl.glAttachShader(self.program, sh)
         gl.glLinkProgram(self.program)
         if not gl.glGetProgramiv(self.program, gl.GL_LINK_STATUS):
-            raise RenderError(f"the GL driver rejected the id program ({gl.glGetProgramInfoLog(self.program).decode()}).")
+            raise RenderError(
+                f"the GL driver rejected the id program ({gl.glGetProgramInfoLog(self.program).decode()})."
+            )
         self.vao = gl.glGenVertexArrays(1)
         gl.glBindVertexArray(self.vao)
         self.vbo = gl.glGenBuffers(1)
@@ -148,7 +150,7 @@ class IdRenderer:
         except Exception:  # a context that never came up has nothing to free
             pass
 
-    def __enter__(self) -> "IdRenderer":
+    def __enter__(self) -> IdRenderer:
         return self
 
     def __exit__(self, *exc) -> None:

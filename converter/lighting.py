@@ -25,8 +25,10 @@ def light_direction_world(view: np.ndarray, lighting: Lighting = DEFAULT_LIGHTIN
     return view[:3, :3].T @ d
 
 
-def lambert(normals: np.ndarray, base_rgb: np.ndarray, view: np.ndarray, lighting: Lighting = DEFAULT_LIGHTING) -> np.ndarray:
+def lambert(
+    normals: np.ndarray, base_rgb: np.ndarray, view: np.ndarray, lighting: Lighting = DEFAULT_LIGHTING
+) -> np.ndarray:
     """Display-space colour base * (ambient + diffuse * max(0, n.l)), clipped to 0..1; broadcasts."""
-    l = light_direction_world(view, lighting).astype(np.float32)
-    ndl = np.clip(np.asarray(normals, np.float32) @ l, 0.0, None)
+    light = light_direction_world(view, lighting).astype(np.float32)
+    ndl = np.clip(np.asarray(normals, np.float32) @ light, 0.0, None)
     return np.clip(np.asarray(base_rgb, np.float32) * (lighting.ambient + lighting.diffuse * ndl)[..., None], 0.0, 1.0)

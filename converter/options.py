@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, fields
-from typing import Any, Callable, Mapping
+from typing import Any
 
 from converter.errors import InputError
 
@@ -148,7 +149,7 @@ class ConversionOptions:
         return asdict(self)
 
     @classmethod
-    def from_mapping(cls, data: dict) -> "ConversionOptions":
+    def from_mapping(cls, data: dict) -> ConversionOptions:
         """Build from strings or values (web form, JSON); unknown keys are refused with a clear error."""
         known = {f.name: f for f in fields(cls)}
         kwargs = {}

@@ -6,8 +6,9 @@ is one writer module in converter/writers/ plus one OutputKind entry in OUTPUTS.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any
 
 from converter.errors import InputError
 from converter.options import ConversionOptions, OptionField, Report

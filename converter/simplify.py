@@ -20,6 +20,7 @@ import numpy as np
 
 from converter.animation import FaceAnimation
 from converter.errors import InputError
+from converter.extract import cull, fit_camera
 from converter.options import ConversionOptions, Report
 
 MOTION_COMPONENTS = 6  # principal components of each vertex's displacement carried as attributes
@@ -34,7 +35,7 @@ def _simplify_with_attributes():
     The meshoptimizer 0.2.x Python wrapper calls this C function without argtypes, so its float argument
     cannot be converted (ctypes.ArgumentError) and the size_t result is read as int; we bind the same
     symbol of the bundled library with the C signature instead."""
-    from meshoptimizer import simplifier
+    from meshoptimizer import simplifier  # noqa: PLC0415 - heavy; loaded on first use to keep start-up fast
 
     proto = ctypes.CFUNCTYPE(
         ctypes.c_size_t, _P(ctypes.c_uint), _P(ctypes.c_uint), ctypes.c_size_t, _P(ctypes.c_float), ctypes.c_size_t,
@@ -116,8 +117,6 @@ def _allocate(fn, positions: np.ndarray, attrs: np.ndarray, lock: np.ndarray, fa
 
 def front_facing_any(anim: FaceAnimation, options: ConversionOptions) -> np.ndarray:
     """Bool (F,): triangles front-facing and in view in at least one frame for the options' camera."""
-    from converter.extract import cull, fit_camera
-
     cam = fit_camera(anim, options.size, options.yaw, options.pitch, options.fov, options.ortho)
     xy, z, w = cam.project(anim.frames)
     return cull(xy, z, w, anim.faces, cam.width, cam.height).any(axis=0)
@@ -147,7 +146,7 @@ def simplify(anim: FaceAnimation, max_triangles: int, report: Report,
         pieces = _allocate(fn, positions, attrs, lock, faces, part_ids, parts, max_triangles)
         if sum(len(x) for x in pieces) > max_triangles:
             # Seams and many small pieces (lashes) cannot shrink that far: free the seams, drop small pieces.
-            from meshoptimizer import SIMPLIFY_PRUNE
+            from meshoptimizer import SIMPLIFY_PRUNE  # noqa: PLC0415 - only newer meshoptimizer builds have it
 
             pieces = _allocate(fn, positions, attrs, np.zeros_like(lock), faces, part_ids, parts, max_triangles,
                                SIMPLIFY_PRUNE)
@@ -182,10 +181,8 @@ def budget_deviation_px(original: FaceAnimation, simplified: FaceAnimation, face
 
     Each original vertex is attached at the first frame to the closest point of the simplified mesh of its
     own part (barycentric coordinates); that point then follows the simplified animation."""
-    from scipy.spatial import cKDTree
-    from trimesh.triangles import closest_point, points_to_barycentric
-
-    from converter.extract import cull, fit_camera
+    from scipy.spatial import cKDTree  # noqa: PLC0415 - heavy; loaded on first use to keep start-up fast
+    from trimesh.triangles import closest_point, points_to_barycentric  # noqa: PLC0415 - heavy; loaded on first use to keep start-up fast
 
     cam = fit_camera(simplified, options.size, options.yaw, options.pitch, options.fov, options.ortho)
     xy0, z0, w0 = cam.project(original.frames)

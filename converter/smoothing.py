@@ -18,6 +18,7 @@ from scipy.ndimage import gaussian_filter1d
 from converter.animation import FaceAnimation
 from converter.camera import Camera
 from converter.errors import InputError
+from converter.extract import fit_camera
 
 MAX_SIGMA = 30.0  # frames; beyond this the animation is a blur of itself
 
@@ -44,8 +45,6 @@ def apply(anim: FaceAnimation, options, report) -> FaceAnimation:
     """The --smooth stage of convert.prepare: smooth, and report the deviation at the output camera."""
     if not options.smooth:
         return anim
-    from converter.extract import fit_camera
-
     out = smooth(anim, options.smooth)
     camera = fit_camera(out, options.size, options.yaw, options.pitch, options.fov, options.ortho)
     report.figures["smooth_max_px"], report.figures["smooth_mean_px"] = deviation_px(anim.frames, out.frames, camera)

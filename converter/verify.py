@@ -24,7 +24,11 @@ from typing import Any
 import numpy as np
 from lxml import etree
 
+from converter.camera import Camera
+from converter.convert import load, prepare
 from converter.errors import InputError
+from converter.extract import cull
+from converter.options import ConversionOptions, Report
 
 SVG_NS = "{http://www.w3.org/2000/svg}"
 _TOKEN = re.compile(r"[MmLlZzHhVv]|[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
@@ -380,9 +384,6 @@ def compare(ev: Evaluated, exact_xy: np.ndarray, expected_visible: np.ndarray, f
 
 def verify_animation(data: bytes, anim, tolerance: float | None = None) -> Verification:
     """Verify SVG bytes against an already prepared FaceAnimation (the exact 3D the SVG should show)."""
-    from converter.camera import Camera
-    from converter.extract import cull
-
     ev = evaluate(data)
     camera = Camera.from_json(ev.meta["camera"])
     xy, ndc_z, w = camera.project(anim.frames)
@@ -401,9 +402,6 @@ def verify_animation(data: bytes, anim, tolerance: float | None = None) -> Verif
 def verify_file(svg_path: str | Path, input_path: str | Path, cache: str | Path | None = None,
                 tolerance: float | None = None) -> Verification:
     """Verify an SVG written by facesvg against the input it was converted from."""
-    from converter.convert import load, prepare
-    from converter.options import ConversionOptions, Report
-
     try:
         data = Path(svg_path).read_bytes()
     except OSError as exc:

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
+from converter.formats.ictfacekit import EYEBALL_LEFT, EYEBALL_RIGHT, load_ict_head
 from converter.mpeg4.facepoints import MULTIPIE_TO_FDP, complete_points, ear_points, nearest
 from converter.mpeg4.fdp import Fdp, fapu_from_points
-from converter.formats.ictfacekit import EYEBALL_LEFT, EYEBALL_RIGHT, load_ict_head
 
 
 def ict_fdp(folder: str | Path) -> Fdp:

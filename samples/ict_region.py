@@ -54,7 +54,7 @@ def classify(head: IctHead, face_vertices: int = FACE_VERTICES) -> tuple[np.ndar
 def face_region(head: IctHead, triangles: int = 3000, lashes: bool = False, lock_border: bool = True,
                 parts: tuple[str, ...] | None = None, face_vertices: int = FACE_VERTICES) -> list[Piece]:
     """The face's parts, then each eye's parts (only `parts` when given), simplified to ~`triangles` in all."""
-    import meshoptimizer as mo
+    import meshoptimizer as mo  # noqa: PLC0415 - only the sample builder needs it
 
     piece, part = classify(head, face_vertices)
     shares = {k: v for k, v in BUDGET.items()

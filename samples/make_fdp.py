@@ -18,10 +18,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from converter import formats
+from converter.formats.ictfacekit import load_ict_head
 from converter.mpeg4.facepoints import mediapipe_fdp, transfer_fdp
 from converter.mpeg4.fdp import save_fdp
 from samples.ict_fdp import ict_fdp
-from converter.formats.ictfacekit import load_ict_head
 
 
 def main(data: Path) -> None:

@@ -23,8 +23,8 @@ sys.path.insert(0, str(ROOT))
 
 from converter.animation import DEFAULT_PART_COLORS
 from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder, encode_filter
-from samples.ict_region import face_region, sphere_center
 from converter.formats.ictfacekit import IctHead, load_ict_head
+from samples.ict_region import face_region, sphere_center
 
 EXPRESSIONS = ("mouthSmile_L", "mouthSmile_R", "jawOpen", "eyeBlink_L", "eyeBlink_R",
                "browInnerUp_L", "browInnerUp_R", "browOuterUp_L", "browOuterUp_R")

@@ -38,7 +38,9 @@ def chromium_frames(browser, svg: bytes, times: list[float], width: int, height:
                          + svg.decode("utf-8") + "</body></html>")
         out = []
         for t in times:
-            page.evaluate("(t) => { const s = document.querySelector('svg'); s.pauseAnimations(); s.setCurrentTime(t); }", t)
+            page.evaluate(
+                "(t) => { const s = document.querySelector('svg'); s.pauseAnimations(); s.setCurrentTime(t); }", t
+            )
             page.wait_for_timeout(50)
             png = page.locator("svg").screenshot(omit_background=True, animations="allow")
             out.append(np.asarray(Image.open(io.BytesIO(png)).convert("RGBA")))

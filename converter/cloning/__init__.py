@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from converter.animation import FaceAnimation
-from converter.cloning import rigid
+from converter.cloning import dense, example_based, keyfile, local_frames, rigid
 from converter.errors import InputError
 
 METHODS = ("example", "frames", "dense")
@@ -33,16 +33,10 @@ def clone(source: FaceAnimation, target: FaceAnimation, method: str = "dense", k
         raise InputError("example-based cloning needs key-model pairs; give --keys pairs.zip.")
     head, pose, pivots, scale = factor_pose(source, target)
     if method == "dense":
-        from converter.cloning import dense
-
         out = dense.clone(source.with_frames(head), target, head, correspondences)
     elif method == "frames":
-        from converter.cloning import local_frames
-
         out = local_frames.clone(source.with_frames(head), target, correspondences)
     else:
-        from converter.cloning import example_based, keyfile
-
         pairs = keyfile.read(keys, head[0], target.frames[0])
         out = example_based.ExampleCloner.fit(pairs).apply(head)
     out = rigid.apply_pose(out, pose, pivots[0], pivots[1], scale)

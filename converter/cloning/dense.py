@@ -10,6 +10,7 @@ source motion vector into a target one (11.8-11.14). Runtime: one barycentric bl
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,6 +21,7 @@ from converter.cloning import landmarks, rigid
 from converter.cloning.rbf import VolumeMorph
 from converter.cloning.surface import adjacency, ball_smooth, interpolate, project_cylindrical, smooth
 from converter.errors import InputError
+from converter.userfiles import read_bytes
 
 SMOOTHING = 5  # passes of the neighbour-average noise filter on scale factors
 NORMAL_RADIUS = 0.03  # normals are averaged over this fraction of the face size
@@ -124,15 +126,11 @@ def read_correspondences(path: str | None, source: np.ndarray, target: np.ndarra
     """User correspondences from a JSON file: {"pairs": [[source vertex id or [x,y,z], target ...], ...]}."""
     if not path:
         return np.zeros((0, 3)), np.zeros((0, 3))
-    import json
-
-    from converter.userfiles import read_bytes
-
     raw = read_bytes(path, "correspondence file")
     try:
         data = json.loads(raw)
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"correspondence file {path} is not JSON ({exc}); write {{\"pairs\": [[s, t], ...]}}.") from None
+        raise InputError(f'correspondence file {path} is not JSON ({exc}); write {{"pairs": [[s, t], ...]}}.') from None
     pairs = data.get("pairs") if isinstance(data, dict) else None
     if not isinstance(pairs, list) or not pairs:
         raise InputError(f"correspondence file {path} has no \"pairs\" list; write {{\"pairs\": [[s, t], ...]}}.")

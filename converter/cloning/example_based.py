@@ -111,7 +111,7 @@ class ExampleCloner:
     target_deltas: np.ndarray  # (M, Vt * 3) T_i - T_B
 
     @classmethod
-    def fit(cls, pairs: KeyPairs) -> "ExampleCloner":
+    def fit(cls, pairs: KeyPairs) -> ExampleCloner:
         """Preprocess key-model pairs (compositing, parameterisation, weight functions)."""
         pairs = with_composites(pairs)
         ids = pick_features(pairs.source_base, pairs.source) if pairs.feature_ids is None else pairs.feature_ids

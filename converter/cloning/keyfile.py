@@ -19,8 +19,8 @@ import numpy as np
 
 from converter.cloning.example_based import KeyPairs
 from converter.errors import InputError
-from converter.userfiles import read_bytes
 from converter.formats.obj import parse_obj_vertices
+from converter.userfiles import read_bytes
 
 KINDS = ("emotional", "verbal", "other")
 
@@ -32,7 +32,9 @@ def read(path: str | Path, source_base: np.ndarray, target_base: np.ndarray) -> 
     try:
         zf = zipfile.ZipFile(io.BytesIO(raw))
     except (zipfile.BadZipFile, OSError):
-        raise InputError(f"{path.name} is not a zip file; pack manifest.json and the key-model OBJs into a zip.") from None
+        raise InputError(
+            f"{path.name} is not a zip file; pack manifest.json and the key-model OBJs into a zip."
+        ) from None
     with zf:
         try:
             manifest = json.loads(zf.read("manifest.json"))

@@ -9,6 +9,9 @@ coordinates is divided by the source w-point's local coordinates and multiplied 
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -67,8 +70,6 @@ def landmark_ids(verts: np.ndarray, faces: np.ndarray, correspondences: str | No
     tree = cKDTree(verts[used])
     ids = {k: int(used[tree.query(p)[1]]) for k, p in pts.items()}
     if correspondences:
-        import json
-        from pathlib import Path
 
         try:
             extra = json.loads(Path(correspondences).read_text()).get("landmarks", {})

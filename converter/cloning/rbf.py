@@ -19,7 +19,7 @@ class VolumeMorph:
     weights: np.ndarray  # (N + 4, 3): radial weights then the affine part
 
     @classmethod
-    def fit(cls, source: np.ndarray, target: np.ndarray, lam: float = 1e-6) -> "VolumeMorph":
+    def fit(cls, source: np.ndarray, target: np.ndarray, lam: float = 1e-6) -> VolumeMorph:
         """Train on sparse correspondences source[i] -> target[i]; lam is relative to the kernel scale."""
         source = np.asarray(source, np.float64)
         target = np.asarray(target, np.float64)
@@ -87,7 +87,7 @@ class CardinalWeights:
     radial: np.ndarray  # (M, K) r
 
     @classmethod
-    def fit(cls, params: np.ndarray, values: np.ndarray) -> "CardinalWeights":
+    def fit(cls, params: np.ndarray, values: np.ndarray) -> CardinalWeights:
         """Fit K weight functions to values (M, K) at example parameters (M, n)."""
         params = np.asarray(params, np.float64)
         values = np.asarray(values, np.float64)

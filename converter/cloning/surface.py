@@ -109,8 +109,9 @@ def project_cylindrical(points: np.ndarray, verts: np.ndarray, faces: np.ndarray
 
     The ray is perpendicular to the vertical centreline through axis_xz and passes through the point;
     of the valid hits the one nearest the point wins. With point normals, triangles facing the other way
-    are refused: that keeps a lower-lip point off upper-lip triangles where the lips touch (11.5). Points whose ray misses every nearby triangle
-    (surface borders, the top of the head) fall back to the nearest surface point.
+    are refused: that keeps a lower-lip point off upper-lip triangles where the lips touch (11.5).
+    Points whose ray misses every nearby triangle (surface borders, the top of the head) fall back to the
+    nearest surface point.
     """
     points = np.asarray(points, np.float64)
     cand = candidates(points, verts, faces, k)

@@ -42,7 +42,8 @@ from __future__ import annotations
 
 import heapq
 import math
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 from scipy import sparse

@@ -84,9 +84,14 @@ class GltfBuilder:
         stride = row if (target == ARRAY_BUFFER or meshopt == "ATTRIBUTES") else None
         if meshopt in ("TRIANGLES", "INDICES"):
             stride = array.itemsize
-        view = self.view(array.astype(array.dtype.newbyteorder("<")).tobytes(), stride=stride, target=target,
-                         meshopt=meshopt, count=count if meshopt != "TRIANGLES" and meshopt != "INDICES" else array.size,
-                         filter=filter)
+        view = self.view(
+            array.astype(array.dtype.newbyteorder("<")).tobytes(),
+            stride=stride,
+            target=target,
+            meshopt=meshopt,
+            count=count if meshopt != "TRIANGLES" and meshopt != "INDICES" else array.size,
+            filter=filter,
+        )
         acc: dict = {"bufferView": view, "componentType": ctype, "count": int(count if ncomp > 1 or width == 1
                                                                                else array.size), "type": type_}
         if normalized:
@@ -144,7 +149,7 @@ class GltfBuilder:
 
 def meshopt_encode(raw: bytes, mode: str, count: int | None, stride: int | None) -> bytes:
     """Compress one buffer view with meshoptimizer's encoders (format version 0, as EXT_meshopt_compression needs)."""
-    import meshoptimizer as mo
+    import meshoptimizer as mo  # noqa: PLC0415 - heavy; loaded on first use to keep start-up fast
 
     if mode == "ATTRIBUTES":
         mo.encode_vertex_version(0)
@@ -159,7 +164,7 @@ def meshopt_encode(raw: bytes, mode: str, count: int | None, stride: int | None)
 
 
 def _lib():
-    from meshoptimizer._loader import lib
+    from meshoptimizer._loader import lib  # noqa: PLC0415 - heavy; loaded on first use to keep start-up fast
 
     for fn in ("meshopt_encodeFilterOct", "meshopt_encodeFilterQuat"):
         getattr(lib, fn).argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_size_t, ctypes.c_int, ctypes.c_void_p]

@@ -4,11 +4,12 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from converter.animation import FaceAnimation
 from converter.errors import InputError
+from converter.formats import gltf, objseq, ply, pointcache
 from converter.formats.weights import is_capture
 from converter.userfiles import read_bytes
 
@@ -58,7 +59,10 @@ def sniff(data: bytes) -> str:
     if head[:1] == b"{":
         return "gltf"
     text = head.decode("latin-1")
-    if any(line.split(" ", 1)[0] in ("v", "f", "o", "g", "vt", "vn", "mtllib", "usemtl") for line in text.splitlines()[:200]):
+    if any(
+        line.split(" ", 1)[0] in ("v", "f", "o", "g", "vt", "vn", "mtllib", "usemtl")
+        for line in text.splitlines()[:200]
+    ):
         return "obj"
     raise InputError("the input is not a glTF/GLB file, a zip of OBJ/PLY frames, an OBJ or a PLY mesh; check the file.")
 
@@ -73,8 +77,6 @@ def _first_zip_entry(data: bytes) -> str:
 
 def check_gltf_document(data: bytes, name: str) -> None:
     """Refuse, with what it is, a JSON that is no glTF (a capture, other JSON) or a glTF that needs Draco."""
-    from converter.formats import gltf
-
     if data[:4] != b"glTF":
         try:
             doc = json.loads(data.decode("utf-8-sig"))
@@ -105,21 +107,13 @@ def _load(path: Path, fps: float | None, cache: str | Path | None, animation: st
     kind = sniff(data)
     name = path.stem
     if kind in ("glb", "gltf"):
-        from converter.formats import gltf
-
         check_gltf_document(data, path.name)
         return gltf.load_gltf(data, base_dir=path.parent, fps=fps, name=name, animation=animation)
     if animation is not None:
         raise InputError(f"--animation picks a glTF animation, and {path.name} is not glTF; leave it out.")
     if kind == "zip":
-        from converter.formats import objseq
-
         return objseq.load_zip(data, fps=fps, name=name)
-    from converter.formats import pointcache
-
     if kind == "ply":
-        from converter.formats import ply
-
         still = ply.load_ply_static(data, fps=fps, name=name)
         return still if cache is None else pointcache.animate(still, read_bytes(cache, "point cache"), fps=fps)
     if cache is None:  # a mesh on its own: one frame (animate it with --cache FILE.pc2|.mdd)

@@ -79,7 +79,9 @@ def from_gltf(data: bytes, base_dir: Path, name: str = "face") -> MorphFace:
         if not isinstance(node, dict) or not isinstance(node.get("mesh"), int):
             continue
         meshes = doc.get("meshes") or []
-        mesh = meshes[node["mesh"]] if 0 <= node["mesh"] < len(meshes) and isinstance(meshes[node["mesh"]], dict) else {}
+        mesh = (
+            meshes[node["mesh"]] if 0 <= node["mesh"] < len(meshes) and isinstance(meshes[node["mesh"]], dict) else {}
+        )
         prims = mesh.get("primitives") or [{}]
         k = len((prims[0] if isinstance(prims[0], dict) else {}).get("targets") or [])
         if not k:
@@ -110,7 +112,7 @@ def _posing_document(doc: dict, slots: list[tuple[int, list[str]]], names: list[
     n = len(names) + 1
     blobs = [np.arange(n, dtype="<f4").tobytes()]
     samplers, channels = [], []
-    for node, labels in slots:
+    for _node, labels in slots:
         w = np.zeros((n, len(labels)), "<f4")
         for slot, label in enumerate(labels):
             if label:
@@ -193,7 +195,8 @@ def from_ict(folder: Path) -> MorphFace:
     """The ICT FaceKit head and all its expression shapes (deltas from the neutral)."""
     head = load_ict_head(folder)
     names = head.expression_names()
-    deltas = np.stack([head.delta(n) for n in names]).astype(np.float32) if names else np.zeros((0, len(head.vertices), 3), np.float32)
+    empty = np.zeros((0, len(head.vertices), 3), np.float32)
+    deltas = np.stack([head.delta(n) for n in names]).astype(np.float32) if names else empty
     return MorphFace(head.vertices, deltas, names, head.faces, head.part_ids, head.parts, folder.name,
                      extras={"morph_targets": names})
 

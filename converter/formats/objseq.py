@@ -20,6 +20,8 @@ from converter.animation import DEFAULT_PART_COLORS, FaceAnimation, Part
 from converter.errors import InputError
 from converter.formats.obj import parse_obj, parse_obj_vertices
 from converter.formats.parts import parts_for_groups
+from converter.formats.ply import load_ply_static, read_ply
+from converter.formats.pointcache import animate, load_obj_cache
 
 DEFAULT_FPS = 30.0
 MAX_ENTRIES = 20_000
@@ -49,20 +51,14 @@ def load_zip(data: bytes, fps: float | None = None, name: str = "face") -> FaceA
         if len(objs) + len(plys) != 1 or len(caches) != 1:
             raise InputError(f"{name} must hold one mesh (.obj/.ply) and one .pc2/.mdd/.npy cache, or only numbered "
                              f"frames; it has {len(objs) + len(plys)} meshes and {len(caches)} cache files.")
-        from converter.formats.pointcache import animate, load_obj_cache
-
         if objs:
             return load_obj_cache(read(zf, objs[0], name), read(zf, caches[0], name), fps=fps, name=name)
-        from converter.formats.ply import load_ply_static
-
         return animate(load_ply_static(read(zf, plys[0], name), name=name), read(zf, caches[0], name), fps=fps)
     if objs and plys:
         raise InputError(f"{name} mixes .obj and .ply frames; zip frames of one format.")
     meshes.sort(key=lambda i: natural_key(i.filename))
     first_name = meshes[0].filename
     if plys:
-        from converter.formats.ply import read_ply
-
         rest, faces, vertex_colors = read_ply(read(zf, meshes[0], name), first_name)
         parts, part_ids = (Part("skin", DEFAULT_PART_COLORS["skin"]),), np.zeros(len(faces), np.int32)
 
@@ -123,7 +119,9 @@ def read(zf: zipfile.ZipFile, info: zipfile.ZipInfo, name: str) -> bytes:
         with zf.open(info) as fh:
             data = fh.read(info.file_size + 1)
     except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, NotImplementedError, RuntimeError) as exc:
-        raise InputError(f"{name}: entry {info.filename!r} cannot be read ({str(exc)[:80]}); the zip is corrupt.") from None
+        raise InputError(
+            f"{name}: entry {info.filename!r} cannot be read ({str(exc)[:80]}); the zip is corrupt."
+        ) from None
     if len(data) > info.file_size:
         raise InputError(f"{name}: entry {info.filename!r} is larger than its header says; the zip is corrupt.")
     return data

@@ -19,7 +19,7 @@ DEFAULT_FPS = 30.0
 
 def read_ply(data: bytes, name: str = "mesh.ply") -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """(vertices (V,3) float32, triangles (F,3) int32, vertex colours (V,3) 0..1 or None) of a PLY mesh."""
-    import trimesh
+    import trimesh  # noqa: PLC0415 - heavy; loaded on first use to keep start-up fast
 
     if data[:3] != b"ply":
         raise InputError(f"{name} is not a PLY file (it does not start with 'ply').")

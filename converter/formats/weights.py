@@ -61,7 +61,7 @@ class WeightTrack:
         """Number of frames T."""
         return int(self.values.shape[0])
 
-    def sampled(self, fps: float) -> "WeightTrack":
+    def sampled(self, fps: float) -> WeightTrack:
         """The track resampled (linear) onto a regular grid k / fps covering its time span."""
         span = float(self.times[-1] - self.times[0]) if self.n_frames > 1 else 0.0
         n = int(math.floor(span * fps + 1e-6)) + 1
@@ -142,7 +142,9 @@ def parse_livelinkface_csv(text: str, name: str = "capture.csv") -> WeightTrack:
             table[:, i] = [float(r[i]) for r in body]
         except ValueError:
             bad = next(k for k, r in enumerate(body) if not _is_float(r[i]))
-            raise InputError(f"{name} row {bad + 2}, column {header[i]}: {body[bad][i][:30]!r} is not a number.") from None
+            raise InputError(
+                f"{name} row {bad + 2}, column {header[i]}: {body[bad][i][:30]!r} is not a number."
+            ) from None
     if not np.isfinite(table[:, numeric]).all():
         k, j = np.argwhere(~np.isfinite(table[:, numeric]))[0]
         raise InputError(f"{name} row {k + 2}, column {header[numeric[j]]} is NaN or infinite; re-export the take.")
@@ -276,7 +278,8 @@ def _frame_list(frames: list[dict], fps, name: str) -> WeightTrack:
         t = t - t[0]
         if time_key == "timestamp" and len(t) > 1 and np.median(np.diff(t)) > 1.0:
             t = t / 1000.0  # milliseconds (Date.now()/performance.now() recorders)
-        rate = _fps(fps, name) if fps is not None else (1.0 / float(np.median(np.diff(t))) if len(t) > 1 else DEFAULT_FPS)
+        measured = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else DEFAULT_FPS
+        rate = _fps(fps, name) if fps is not None else measured
     else:
         rate = _fps(fps, name) if fps is not None else DEFAULT_FPS
         t = np.arange(len(rows)) / rate

@@ -12,6 +12,7 @@ import numpy as np
 
 from converter.animation import FaceAnimation
 from converter.errors import InputError
+from converter.mpeg4 import loa
 from converter.mpeg4.deform import deform
 from converter.mpeg4.fap import FapStream, read_fap, write_fap
 from converter.mpeg4.fdp import Fdp, fapu_from_points, fdp_to_json, load_fdp, save_fdp
@@ -72,8 +73,6 @@ def drive(face: FaceAnimation, fap: FapStream | str | Path, fdp: Fdp | str | Pat
     """The face (its frame 0 is the neutral) animated by a FAP stream, resampled to fps when given."""
     stream = fap if isinstance(fap, FapStream) else read_fap(Path(fap))
     if stream.extra.get("loa", "high") != "high":
-        from converter.mpeg4 import loa
-
         stream = loa.expand(stream)  # a reduced stream carries one value per FAP group
     neutral = face.frames[0]
     if fdp is None:

@@ -56,7 +56,9 @@ def deform(vertices: np.ndarray, tables: FaceDefTables, values: np.ndarray, fapu
     if values.ndim != 2 or values.shape[1] != N_FAPS:
         raise InputError(f"FAP values must be (frames, 68), got shape {values.shape}.")
     if v0.shape != (tables.n_vertices, 3):
-        raise InputError(f"the tables were built for {tables.n_vertices} vertices, the mesh has {len(v0)}; rebuild them.")
+        raise InputError(
+            f"the tables were built for {tables.n_vertices} vertices, the mesh has {len(v0)}; rebuild them."
+        )
     a = values * fapu_scale(fapu or tables.fapu)[None]  # model lengths or radians
     a[:, :2] = 0.0
     t = len(a)
@@ -107,7 +109,9 @@ def _weighted_rotation(p: np.ndarray, weights: np.ndarray, e, angle: np.ndarray)
     theta = angle[:, None] * weights[None, :].astype(np.float32)
     s, c = np.sin(theta), np.cos(theta)
     kq = q[..., 0] * k[0] + q[..., 1] * k[1] + q[..., 2] * k[2]  # axis component
-    cross = (k[1] * q[..., 2] - k[2] * q[..., 1], k[2] * q[..., 0] - k[0] * q[..., 2], k[0] * q[..., 1] - k[1] * q[..., 0])
+    cross = (k[1] * q[..., 2] - k[2] * q[..., 1],
+             k[2] * q[..., 0] - k[0] * q[..., 2],
+             k[0] * q[..., 1] - k[1] * q[..., 0])
     out = np.empty_like(q)
     one_c = kq * (1 - c)
     for i in range(3):

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from converter.formats.obj import parse_obj
 from converter.mpeg4.fdp import Fdp, fapu_from_points
 
 # Multi-PIE 68 landmark index -> MPEG-4 feature point (l = the face's left, +x). Pairs of landmarks mean the skin
@@ -61,7 +62,7 @@ def complete_points(vertices: np.ndarray, skin: np.ndarray, pts: dict[str, int],
     front = None
     if "3.7" in p and "3.8" in p:
         front = min(p["3.7"][2], p["3.8"][2]) - 0.5 * abs(p["3.7"][0] - p["3.8"][0])
-    for eye, (fp, sign) in (("left_eye", ("3.5", 1)), ("right_eye", ("3.6", -1))):
+    for eye, (fp, _sign) in (("left_eye", ("3.5", 1)), ("right_eye", ("3.6", -1))):
         if fp not in out and eye in parts and len(parts[eye]):
             ids = np.asarray(parts[eye])
             out[fp] = int(ids[np.argmax(v[ids, 2])])  # pupil: the front-most point of the eyeball
@@ -108,8 +109,6 @@ def ear_points(v: np.ndarray, skin: np.ndarray) -> dict[str, int]:
 
 def mediapipe_fdp(obj_path: str | Path) -> Fdp:
     """FDP of the MediaPipe canonical face (with or without the 10 iris vertices)."""
-    from converter.formats.obj import parse_obj
-
     v, f, _, _ = parse_obj(Path(obj_path).read_text(), Path(obj_path).name)
     v = v.astype(np.float64)
     iris = len(v) >= 478
@@ -139,7 +138,7 @@ def transfer_fdp(fdp: Fdp, src_vertices: np.ndarray, face) -> Fdp:
     A vertex of the target's non-skin parts joins the source part of its nearest source vertex; a feature point
     goes to the nearest target vertex of the same kind (skin, or the part the source point lies in).
     """
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # noqa: PLC0415 - heavy; loaded on first use to keep start-up fast
 
     v = face.frames[0].astype(np.float64)
     skin_ids = [i for i, p in enumerate(face.parts) if p.name == "skin"]

@@ -132,7 +132,9 @@ def read_fap(source: str | Path) -> FapStream:
         nums = [_number(tok, vn, "a FAP value") for tok in vtoks[1:]]
         low = int(bits[2:].sum())
         extra_n = len(nums) - low
-        options = [(a, b) for a in ((1, FAP1_VALUES) if bits[0] else (0,)) for b in ((1, FAP2_VALUES) if bits[1] else (0,))]
+        options = [
+            (a, b) for a in ((1, FAP1_VALUES) if bits[0] else (0,)) for b in ((1, FAP2_VALUES) if bits[1] else (0,))
+        ]
         fit = [(a, b) for a, b in options if a + b == extra_n]
         if not fit:
             want = " or ".join(str(low + a + b) for a, b in options)

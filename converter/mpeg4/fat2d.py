@@ -8,9 +8,9 @@ and quantised (the 2D FAT, piecewise linear in between). Rendering and projectin
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 from PIL import Image, ImageDraw
@@ -177,7 +177,7 @@ def build(
     fdp,
     stream: FapStream,
     deform_fn: DeformFn,
-    options: ConversionOptions = ConversionOptions(to="fap2d"),
+    options: ConversionOptions | None = None,
     mesh_faces: np.ndarray | None = None,
     progress: Progress = no_progress,
 ) -> Fat2dSheet:
@@ -185,6 +185,7 @@ def build(
 
     mesh_faces: the 2D mesh's triangles when they differ from the face's (e.g. a simplified mesh); the portrait
     is always rendered from the full face."""
+    options = options or ConversionOptions(to="fap2d")
     if not 0 <= options.neutral_frame < anim.n_frames:
         raise InputError(f"neutral frame {options.neutral_frame} is outside 0..{anim.n_frames - 1}; choose one inside.")
     neutral = np.asarray(anim.frames[options.neutral_frame], np.float64)

@@ -55,7 +55,9 @@ class Fdp:
                 raise InputError(f"FDP point {name} refers to vertex {i}, the mesh has {n_vertices}; fix the FDP file.")
         for name, ids in self.parts.items():
             if ids and (min(ids) < 0 or max(ids) >= n_vertices):
-                raise InputError(f"FDP part {name} refers to vertices outside the mesh ({n_vertices}); fix the FDP file.")
+                raise InputError(
+                    f"FDP part {name} refers to vertices outside the mesh ({n_vertices}); fix the FDP file."
+                )
 
 
 def _dist(a: np.ndarray, b: np.ndarray, axis: int | None) -> float:
@@ -120,7 +122,9 @@ def _ids_from_json(items, name: str) -> list[int]:
 
 def fdp_to_json(fdp: Fdp) -> str:
     """Deterministic JSON text of an Fdp."""
-    key = lambda k: tuple(int(x) for x in k.split(".")) if all(x.isdigit() for x in k.split(".")) else (999, k)
+    def key(k: str) -> tuple:
+        return tuple(int(x) for x in k.split(".")) if all(x.isdigit() for x in k.split(".")) else (999, k)
+
     data = {
         "format": FORMAT,
         "version": 1,
@@ -167,7 +171,8 @@ def fdp_from_json(data: dict, name: str = "FDP") -> Fdp:
     fapu = {}
     for k, v in (data.get("fapu") or {}).items():
         if k not in FAPU_NAMES or not isinstance(v, (int, float)) or not v > 0:
-            raise InputError(f"{name}: fapu entries must be {', '.join(FAPU_NAMES)} with positive values, got {k}={v!r}.")
+            raise InputError(f"{name}: fapu entries must be {', '.join(FAPU_NAMES)} with positive values, "
+                             f"got {k}={v!r}.")
         fapu[k] = float(v)
     vc = data.get("vertex_count")
     if vc is not None and (not isinstance(vc, int) or vc <= 0):
@@ -177,7 +182,7 @@ def fdp_from_json(data: dict, name: str = "FDP") -> Fdp:
 
 def parse_xface_fdp(text: str | bytes, name: str = "FDP") -> Fdp:
     """An Fdp from Xface's .fdp XML: FAPU, feature-point vertex indices (per submesh), eye pivots."""
-    from lxml import etree
+    from lxml import etree  # noqa: PLC0415 - heavy; loaded on first use to keep start-up fast
 
     try:
         root = etree.fromstring(text.encode() if isinstance(text, str) else text,

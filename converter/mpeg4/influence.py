@@ -42,8 +42,9 @@ def edge_graph(vertices: np.ndarray, faces: np.ndarray, keep: np.ndarray | None 
     w = np.linalg.norm(vertices[e[:, 0]].astype(np.float64) - vertices[e[:, 1]], axis=1)
     w = np.maximum(w, 1e-12)  # csgraph treats explicit zeros as missing edges
     n = len(vertices)
-    g = sp.coo_matrix((np.concatenate([w, w]), (np.concatenate([e[:, 0], e[:, 1]]), np.concatenate([e[:, 1], e[:, 0]]))),
-                      shape=(n, n))
+    g = sp.coo_matrix(
+        (np.concatenate([w, w]), (np.concatenate([e[:, 0], e[:, 1]]), np.concatenate([e[:, 1], e[:, 0]]))), shape=(n, n)
+    )
     return g.tocsr()
 
 
@@ -54,10 +55,11 @@ def geodesic(graph: sp.csr_matrix, sources: np.ndarray, limit: float = np.inf) -
     return dijkstra(graph, directed=False, indices=np.asarray(sources), limit=limit)
 
 
-def attach_unreachable(graph: sp.csr_matrix, vertices: np.ndarray, anchors: np.ndarray, movable: np.ndarray) -> np.ndarray:
+def attach_unreachable(graph: sp.csr_matrix, vertices: np.ndarray, anchors: np.ndarray,
+                       movable: np.ndarray) -> np.ndarray:
     """For each vertex, the vertex whose weights it copies: itself, or for a movable vertex in a component without
     any anchor (eyelashes, loose shells), the nearest vertex (Euclidean) of a component that has one."""
-    from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree  # noqa: PLC0415 - heavy; loaded on first use to keep start-up fast
 
     n_comp, label = connected_components(graph, directed=False)
     has_anchor = np.zeros(n_comp, bool)

@@ -57,7 +57,7 @@ class FapDef:
 def fap_table() -> tuple[FapDef, ...]:
     """The 68 FAPs in order (index k is FAP k+1), read from the bundled faps.csv."""
     text = resources.files("converter.mpeg4").joinpath("faps.csv").read_text(encoding="utf-8")
-    rows = csv.DictReader(io.StringIO("".join(l for l in text.splitlines(True) if not l.startswith("#"))))
+    rows = csv.DictReader(io.StringIO("".join(line for line in text.splitlines(True) if not line.startswith("#"))))
     table = tuple(
         FapDef(int(r["fap"]), r["name"], r["units"], r["dir"] == "B", r["axis"], int(r["group"]), r["fdp"])
         for r in rows

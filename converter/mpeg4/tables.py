@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from converter.errors import InputError
-from converter.userfiles import read_bytes, write_atomic
 from converter.mpeg4 import influence
 from converter.mpeg4.fdp import Fdp, fapu_from_points
 from converter.mpeg4.standard import FAPU_NAMES, fap_table
+from converter.userfiles import read_bytes, write_atomic
 
 FORMAT = "facesvg-facedeftables"
 
@@ -80,7 +80,7 @@ class FaceDefTables:
         write_atomic(Path(path), json.dumps(self.to_json(), separators=(",", ":")).encode())
 
     @classmethod
-    def from_json(cls, data: dict, name: str = "tables") -> "FaceDefTables":
+    def from_json(cls, data: dict, name: str = "tables") -> FaceDefTables:
         """Rebuild from to_json() output; InputError when it is not a tables file."""
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise InputError(f"{name} is not a facesvg face definition tables file.")
@@ -98,7 +98,7 @@ class FaceDefTables:
             raise InputError(f"{name} is a damaged tables file ({exc}); rebuild it.") from None
 
     @classmethod
-    def load(cls, path: str | Path) -> "FaceDefTables":
+    def load(cls, path: str | Path) -> FaceDefTables:
         """Read a tables JSON file."""
         path = Path(path)
         raw = read_bytes(path, "tables file")

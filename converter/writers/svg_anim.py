@@ -8,11 +8,11 @@ Three encodings of the same document structure:
   runs where a visible triangle does not move merged, placed with keyTimes (exact to 2 decimals); a path keeps
   every frame where keyTimes would cost more (the chapter's own remark on long dynamic sequences).
 - ``bounded`` (default): per path only the keys needed so SMIL's linear interpolation stays within
-  options.tolerance px of the exact projection at every frame where the triangle is visible (converter.encode.freeknots:
-  greedy keys with free values and keyTimes, or evenly spaced keys without them where that is shorter); integer coordinates in a
-  viewBox scaled so rounding is part of the same budget; relative path syntax; static triangles without
-  <animate>; fill and stroke are currentColor, the colour keyed linearly within COLOR_TOLERANCE levels and its
-  first value a shared CSS class; visibility a discrete class animation; never-visible triangles dropped.
+  options.tolerance px of the exact projection at every frame where the triangle is visible
+  (converter.encode.freeknots: greedy keys with free values and keyTimes, or evenly spaced keys without them
+  where that is shorter); integer coordinates in a viewBox scaled so rounding is part of the same budget;
+  relative path syntax; static triangles without <animate>; fill and stroke are currentColor, the colour
+  keyed linearly within COLOR_TOLERANCE levels and its first value a shared CSS class; visibility a discrete class animation; never-visible triangles dropped.
 
 Frame k shows at t = k / fps; dur = T / fps; linear animations end with a key at keyTime 1 (the loop end).
 """

@@ -94,7 +94,9 @@ def test_llf_jaw_open_moves_the_jaw_by_its_shape_delta(driven, shared_data):
         moved = anim.frames[k, ids] - neutral[ids] - others
         np.testing.assert_allclose(moved, w[k] * jaw[ids], atol=2e-4)
     k = int(np.argmax(w))
-    assert np.linalg.norm(w[k] * jaw[ids], axis=1).max() > 0.5  # the jaw really opens, by about half a centimetre or more
+    assert (
+        np.linalg.norm(w[k] * jaw[ids], axis=1).max() > 0.5
+    )  # the jaw really opens, by about half a centimetre or more
 
 
 def test_llf_eye_yaw_turns_the_eyeballs_rigidly(driven, shared_data):
@@ -116,10 +118,9 @@ def test_llf_eye_yaw_turns_the_eyeballs_rigidly(driven, shared_data):
 @pytest.mark.browser
 @pytest.mark.slow
 def test_llf_driven_ict_plays_in_chromium(driven, browser, artifacts):
-    from svgrender import chromium_frame
-
     from converter.convert import convert_animation
     from converter.options import ConversionOptions
+    from svgrender import chromium_frame
 
     _, anim = driven
     # The front of the face, every 4th triangle, 30 frames around the widest jaw opening: small enough for a test.
@@ -220,7 +221,8 @@ def test_obj_zip_face_by_shape_name(tmp_path):
     face = load_morph_face(path)
     assert face.names == ["eyeBlink_L", "jawOpen"]
     csv_path = tmp_path / "w.json"
-    csv_path.write_text(json.dumps({"exportFps": 10, "numFrames": 2, "facsNames": ["jawOpen", "eyeBlinkLeft", "tongueOut"],
+    names = ["jawOpen", "eyeBlinkLeft", "tongueOut"]
+    csv_path.write_text(json.dumps({"exportFps": 10, "numFrames": 2, "facsNames": names,
                                     "weightMat": [[0.0, 1.0, 0.3], [0.5, 0.0, 0.3]]}))
     anim = blendshapes.drive(face, read_weights(csv_path))
     np.testing.assert_allclose(anim.frames[0], v + [0, 0, 0.5], atol=1e-6)

@@ -16,7 +16,7 @@ from converter.writers import fap2d
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # player.py, standin.py, reference_render.py
 
-from standin import standin_deform, synthetic_face  # noqa: E402  (found through the line above)
+from standin import standin_deform, synthetic_face
 
 XFACE = Path(__file__).resolve().parents[1] / "data" / "mpeg4" / "xface"
 

@@ -11,7 +11,6 @@ import jsonschema
 import numpy as np
 import pytest
 import reference_render
-from player import flatten
 from scipy.ndimage import binary_dilation
 
 from converter.animation import FaceAnimation
@@ -21,6 +20,7 @@ from converter.mpeg4 import fat2d
 from converter.mpeg4.fap import read_fap
 from converter.options import ConversionOptions
 from converter.writers import fap2d
+from player import flatten
 
 
 def test_manifest_validates_and_arrays_fit(synthetic_package):

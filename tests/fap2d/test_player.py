@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import reference_render
-from player import canvas_rgba, flatten, player_frame, player_page, player_values
 from skimage.metrics import structural_similarity
+
+from player import canvas_rgba, flatten, player_frame, player_page, player_values
 
 # Same-frame SSIM threshold. What differs between the two renderers is only how triangle edges are
 # anti-aliased (Skia's coverage-based clip vs the reference's pixel-centre rule) and Skia's bilinear filter vs

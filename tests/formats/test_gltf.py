@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from converter.errors import InputError
+from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder, encode_filter
 from converter.formats import load
 from converter.formats.gltf import _Document, load_gltf, parse_container
-from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder, encode_filter
 from tests.formats.helpers import TRI, add_track, triangle_scene
 
 HERE = Path(".")

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from converter.errors import InputError
+from converter.export.gltf_builder import ARRAY_BUFFER, GltfBuilder
 from converter.formats import load
 from converter.formats.gltf import load_gltf
-from converter.export.gltf_builder import ARRAY_BUFFER, GltfBuilder
 from tests.formats.helpers import add_track, skinned_triangle, triangle_scene
 
 HERE = Path(".")

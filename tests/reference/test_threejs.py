@@ -20,8 +20,8 @@ from PIL import Image
 from conftest import ARTIFACTS, SAMPLE, SHARED_DATA
 from converter.convert import convert
 from converter.errors import InputError
-from converter.formats.gltf import parse_container
 from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder
+from converter.formats.gltf import parse_container
 from converter.options import ConversionOptions
 from tests.reference import threejs
 
@@ -158,7 +158,9 @@ def morph_scene(split: bool = False) -> bytes:
         if split or not clips:
             clips.append({"name": path if split else "morph_and_turn", "samplers": [], "channels": []})
         clips[-1]["samplers"].append({"input": t, "output": out, "interpolation": "LINEAR"})
-        clips[-1]["channels"].append({"sampler": len(clips[-1]["samplers"]) - 1, "target": {"node": node, "path": path}})
+        clips[-1]["channels"].append(
+            {"sampler": len(clips[-1]["samplers"]) - 1, "target": {"node": node, "path": path}}
+        )
     for clip in clips:
         b.add("animations", clip)
     return b.glb()

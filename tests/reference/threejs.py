@@ -13,9 +13,9 @@ import json
 import mimetypes
 import os
 import shutil
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 from lxml import etree
@@ -107,7 +107,9 @@ def threejs_frames(browser, gltf: Path, meta: dict, frames: Sequence[int], clips
         try:
             page.wait_for_function("window.referencePlayer !== undefined", timeout=60000)
         except PlaywrightTimeout:
-            raise RuntimeError(f"the reference page did not start (errors {errors}, not found {missing_files})") from None
+            raise RuntimeError(
+                f"the reference page did not start (errors {errors}, not found {missing_files})"
+            ) from None
         req = {"url": f"{ORIGIN}/data/{gltf.name}", "clips": clips if clips == "all" else list(clips),
                "view": cam["view"], "projection": cam["projection"], "viewport": [width, height],
                "times": frame_times(meta, frames), "linear": linear}

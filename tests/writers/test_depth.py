@@ -5,8 +5,8 @@ import pytest
 
 from bench.order_measure import order_error
 from converter import extract
-from converter.encode import order
 from converter.animation import FaceAnimation, Part
+from converter.encode import order
 
 
 def crossing(n_frames: int = 12) -> FaceAnimation:
