@@ -12,7 +12,8 @@ Three encodings of the same document structure:
   (converter.encode.freeknots: greedy keys with free values and keyTimes, or evenly spaced keys without them
   where that is shorter); integer coordinates in a viewBox scaled so rounding is part of the same budget;
   relative path syntax; static triangles without <animate>; fill and stroke are currentColor, the colour
-  keyed linearly within COLOR_TOLERANCE levels and its first value a shared CSS class; visibility a discrete class animation; never-visible triangles dropped.
+  keyed linearly within COLOR_TOLERANCE levels and its first value a shared CSS class; visibility a discrete
+  class animation; never-visible triangles dropped.
 
 Frame k shows at t = k / fps; dur = T / fps; linear animations end with a key at keyTime 1 (the loop end).
 """
