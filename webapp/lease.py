@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ctypes
 import fcntl
+import logging
 import os
 import signal
 import socket
@@ -21,6 +22,7 @@ from pathlib import Path
 
 from webapp.jobstore import CANCELLING, FAILED, QUEUED, RUNNING, JobStore
 
+log = logging.getLogger("facesvg.webapp")
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
 LOCK_NAME = "server.lock"
 
@@ -36,7 +38,7 @@ class InstanceLock:
         self.path = Path(folder) / LOCK_NAME
         self.fd: int | None = None
 
-    def acquire(self) -> "InstanceLock":
+    def acquire(self) -> InstanceLock:
         """Take the lock without waiting; InstanceBusy (naming the holder's pid) if another server has it."""
         fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o600)
         try:
@@ -87,7 +89,7 @@ class Heartbeat:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._beat, name=f"lease-{job_id[:8]}", daemon=True)
 
-    def __enter__(self) -> "Heartbeat":
+    def __enter__(self) -> Heartbeat:
         self._thread.start()
         return self
 
@@ -110,9 +112,10 @@ class Heartbeat:
                 os._exit(1)  # the server died and the parent-death signal did not reach us: stop converting
             try:
                 if not self.renew():
+                    log.warning("job %s: lease renewal refused; %s lost its claim", self.job_id, self.owner)
                     return
-            except Exception:  # a busy or restarting store: try again next beat; the lease has slack
-                continue
+            except Exception as exc:  # a busy or restarting store: try again next beat; the lease has slack
+                log.warning("job %s: lease renewal failed (%r); retrying", self.job_id, exc)
 
 
 def settle(store: JobStore, job_id: str, owner: str, retries: int, why: str) -> str | None:

@@ -22,7 +22,7 @@ UNSAFE = ("POST", "PUT", "PATCH", "DELETE")
 PAGE_CSP = ("default-src 'self'; img-src 'self' data: blob:; object-src 'self'; frame-src 'self'; "
             "frame-ancestors 'self'; form-action 'self'; base-uri 'none'")
 OTHER_CSP = "default-src 'none'; frame-ancestors 'self'; base-uri 'none'"  # JSON, images, downloads, errors
-INLINE = re.compile(r"<(script|style)>(.*?)</\1>", re.S)  # inline blocks without attributes
+INLINE = re.compile(r"<(script|style)>(.*?)</\1>", re.DOTALL)  # inline blocks without attributes
 
 
 @functools.lru_cache(maxsize=16)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 import random
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -21,7 +22,7 @@ from web.conftest import free_port, glb_bytes
 
 ROOT = Path(__file__).resolve().parents[2]
 TINY = {"size": "48", "occlusion": "0"}
-FAST_ENV = {"FACESVG_LEASE_SECONDS": "2", "FACESVG_PREVIEW_FRAMES": "2", "FACESVG_RATE_LIMIT": "0",
+FAST_ENV = {"FACESVG_LEASE_SECONDS": "6", "FACESVG_PREVIEW_FRAMES": "2", "FACESVG_RATE_LIMIT": "0",
             "FACESVG_RETRIES": "1", "PYOPENGL_PLATFORM": "egl"}
 
 
@@ -74,7 +75,7 @@ class Serve:
         self.proc = subprocess.Popen(args, cwd=ROOT, env={**os.environ, **FAST_ENV, **(env or {})},
                                      stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
 
-    def wait_up(self, timeout: float = 90) -> "Serve":
+    def wait_up(self, timeout: float = 90) -> Serve:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             if self.proc.poll() is not None:
@@ -348,3 +349,33 @@ def rq_run(instance: Path, redis_url: str, seed: int, n: int = 20, kills: int = 
         server.stop()
     out.seconds = time.monotonic() - t0
     return out
+
+
+def oversized_post(port: int, size: int) -> tuple[bytes, int]:
+    """Declare a body of size bytes and keep sending zeros until the server answers; (answer, bytes sent)."""
+    head = (f"POST /api/v1/jobs HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nContent-Length: {size}\r\n"
+            "Content-Type: multipart/form-data; boundary=x\r\n\r\n").encode()
+    sent = 0
+    answer = b""
+    chunk = b"\0" * 65536
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+        s.sendall(head)
+        s.settimeout(0.05)
+        while sent < size:
+            try:
+                answer += s.recv(4096)
+                if answer:
+                    break
+            except (TimeoutError, BlockingIOError):
+                pass
+            try:
+                s.sendall(chunk)
+                sent += len(chunk)
+            except (BrokenPipeError, ConnectionResetError):
+                break
+        s.settimeout(5)
+        try:
+            answer += s.recv(4096)
+        except OSError:
+            pass
+    return answer, sent

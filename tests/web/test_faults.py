@@ -1,7 +1,7 @@
 """Fault injection: SIGKILL the server, a worker, or both at random points of 20 jobs; every job must end done
 exactly once with a valid SVG, or failed with a clear message; none deleted, duplicated or stuck.
 
-Real `facesvg serve` / `facesvg worker` processes on loopback, 2 s leases, bounded waits. Part of `make test`
+Real `facesvg serve` / `facesvg worker` processes on loopback, 6 s leases, bounded waits. Part of `make test`
 (marked slow; see the report for its duration).
 """
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import io
 import re
-import socket
 import time
 
 import pytest
@@ -90,7 +89,7 @@ def test_security_headers_on_every_response(embedded):
     import hashlib
 
     body = page.get_data(as_text=True)
-    script = re.search(r"<script>(.*?)</script>", body, re.S).group(1)
+    script = re.search(r"<script>(.*?)</script>", body, re.DOTALL).group(1)
     digest = base64.b64encode(hashlib.sha256(script.encode()).digest()).decode()
     assert f"'sha256-{digest}'" in csp
     assert "same-origin" in body or "origin === location.origin" in body
@@ -206,9 +205,9 @@ def test_upload_form_has_the_mobile_preset_and_nav_links_the_api_page(embedded):
 
 def test_a_lost_claim_discards_its_result_and_deletes_nothing(tmp_path):
     """A worker whose lease expired and whose job was re-queued can no longer record it, nor delete it."""
+    from webapp.jobstore import SQLiteStore
     from webapp.lease import settle
     from webapp.runner import ProgressRecorder, _fail, execute
-    from webapp.jobstore import SQLiteStore
     from webapp.storage import Storage
 
     store, storage = SQLiteStore(tmp_path / "t.sqlite3"), Storage(tmp_path / "jobs")
@@ -235,36 +234,11 @@ def test_a_lost_claim_discards_its_result_and_deletes_nothing(tmp_path):
 
 def test_a_declared_300_mib_upload_is_refused_before_the_body_is_read(tmp_path):
     """`facesvg serve` (waitress) answers 413 right after the headers; the client sends almost nothing."""
-    from web.faults import Serve
+    from web.faults import Serve, oversized_post
 
     server = Serve(tmp_path / "inst", workers=1).wait_up()
     try:
-        size = 300 << 20
-        head = (f"POST /api/v1/jobs HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\nContent-Length: {size}\r\n"
-                "Content-Type: multipart/form-data; boundary=x\r\n\r\n").encode()
-        sent = 0
-        with socket.create_connection(("127.0.0.1", server.port), timeout=10) as s:
-            s.sendall(head)
-            s.settimeout(0.05)
-            chunk = b"\0" * 65536
-            answer = b""
-            while sent < size:
-                try:
-                    answer += s.recv(4096)
-                    if answer:
-                        break
-                except (socket.timeout, BlockingIOError):
-                    pass
-                try:
-                    s.sendall(chunk)
-                    sent += len(chunk)
-                except (BrokenPipeError, ConnectionResetError):
-                    break
-            s.settimeout(5)
-            try:
-                answer += s.recv(4096)
-            except OSError:
-                pass
+        answer, sent = oversized_post(server.port, 300 << 20)
         assert answer.startswith(b"HTTP/1.1 413"), answer[:80]
         assert sent < 8 << 20, sent  # refused early: at most a few socket buffers went out of 300 MiB
     finally:
