@@ -351,13 +351,17 @@ def rq_run(instance: Path, redis_url: str, seed: int, n: int = 20, kills: int = 
     return out
 
 
-def oversized_post(port: int, size: int) -> tuple[bytes, int]:
-    """Declare a body of size bytes and keep sending zeros until the server answers; (answer, bytes sent)."""
-    head = (f"POST /api/v1/jobs HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nContent-Length: {size}\r\n"
+def oversized_post(port: int, size: int, chunked: bool = False) -> tuple[bytes, int]:
+    """Send a body of size bytes (declared, or chunked without a length) until the server answers;
+    (answer, body bytes sent)."""
+    length = "Transfer-Encoding: chunked" if chunked else f"Content-Length: {size}"
+    head = (f"POST /api/v1/jobs HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n{length}\r\n"
             "Content-Type: multipart/form-data; boundary=x\r\n\r\n").encode()
     sent = 0
     answer = b""
     chunk = b"\0" * 65536
+    if chunked:
+        chunk = b"10000\r\n" + chunk + b"\r\n"  # 0x10000 = 65536 bytes per chunk
     with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
         s.sendall(head)
         s.settimeout(0.05)
@@ -370,7 +374,7 @@ def oversized_post(port: int, size: int) -> tuple[bytes, int]:
                 pass
             try:
                 s.sendall(chunk)
-                sent += len(chunk)
+                sent += 65536
             except (BrokenPipeError, ConnectionResetError):
                 break
         s.settimeout(5)

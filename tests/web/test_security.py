@@ -243,3 +243,17 @@ def test_a_declared_300_mib_upload_is_refused_before_the_body_is_read(tmp_path):
         assert sent < 8 << 20, sent  # refused early: at most a few socket buffers went out of 300 MiB
     finally:
         server.stop()
+
+
+def test_a_chunked_upload_is_stopped_once_it_passes_the_limit(tmp_path):
+    """No declared length: waitress counts the chunks as they arrive and answers 413 past the limit."""
+    from web.faults import Serve, oversized_post
+
+    server = Serve(tmp_path / "inst", workers=1, env={"FACESVG_MAX_UPLOAD_MB": "1"}).wait_up()
+    try:
+        answer, sent = oversized_post(server.port, 64 << 20, chunked=True)
+        assert answer.startswith(b"HTTP/1.1 413"), answer[:80]
+        limit = (1 << 20) + (1 << 20)  # the upload limit plus the room left for the form fields
+        assert limit <= sent < limit + (8 << 20), sent  # stopped soon after the limit, far from the 64 MiB
+    finally:
+        server.stop()
