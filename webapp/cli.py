@@ -80,6 +80,9 @@ def cmd_worker(args: argparse.Namespace) -> int:
     from converter import convert, extract, render  # noqa: F401
 
     render._pyrender()
+    from webapp.warmup import warm_converter
+
+    warm_converter()  # JIT kernels compiled here are inherited by every work horse (no GL context is made)
     conn = Redis.from_url(args.queue)
     Worker([Queue("facesvg", connection=conn)], connection=conn).work(burst=args.burst)
     return 0

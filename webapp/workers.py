@@ -18,6 +18,7 @@ from webapp.jobstore import RUNNING, JobStore, open_store
 from webapp.lease import die_with_parent, expired, new_owner, settle
 from webapp.runner import execute
 from webapp.storage import Storage
+from webapp.warmup import warm_converter
 
 log = logging.getLogger("facesvg.webapp")
 POLL = 0.2  # seconds between looks at an empty queue
@@ -32,6 +33,7 @@ def worker_main(store_url: str, storage_root: str, owner: str, lease_seconds: fl
     """
     if parent_pid is not None:
         die_with_parent(parent_pid)
+        warm_converter()  # before the first claim: the JIT's first call would starve the first job's heartbeat
     store = open_store(store_url)
     storage = Storage(storage_root)
     try:
