@@ -42,6 +42,7 @@ function setupProgress() {
       bar.value = job.percent;
       percent.textContent = job.percent;
       stage.textContent = job.stage;
+      showStanding(job);
       state.textContent = job.state;
       state.className = "state state-" + job.state;
       if (["done", "failed", "cancelled"].includes(job.state)) {
@@ -56,6 +57,45 @@ function setupProgress() {
     setTimeout(poll, delay);
   }
   poll();
+}
+
+// Queue place and time left, as the API reports them (the page shows the same at load without JS).
+function showStanding(job) {
+  const place = document.getElementById("queue-position");
+  const eta = document.getElementById("eta");
+  if (place) place.textContent = job.queue_position ? `Place in the queue: ${job.queue_position}` : "";
+  if (eta) {
+    const s = job.eta_seconds;
+    eta.textContent = s === null || s === undefined ? ""
+      : `Done in about ${s < 90 ? Math.max(Math.round(s), 1) + " s" : Math.round(s / 60) + " min"}`;
+  }
+}
+
+// Preset buttons set their fields; a refill (the options of a failed job, "Try again") fills the whole form.
+function setField(form, name, value) {
+  const fields = form.querySelectorAll(`[name="${name}"]`);
+  fields.forEach((el) => {
+    if (el.type === "checkbox") el.checked = value === true || value === "1" || value === 1;
+    else if (el.type === "hidden" || el.type === "file") return;
+    else el.value = value === null || value === undefined ? "" : String(value);
+  });
+}
+
+function setupForm() {
+  const form = document.getElementById("upload-form");
+  if (!form) return;
+  document.querySelectorAll("[data-preset]").forEach((button) => {
+    button.addEventListener("click", () => {
+      const values = JSON.parse(button.dataset.preset);
+      Object.entries(values).forEach(([k, v]) => setField(form, k, v));
+      button.setAttribute("aria-pressed", "true");
+    });
+  });
+  const refill = document.getElementById("refill");
+  if (refill) {
+    const values = JSON.parse(refill.textContent || "{}");
+    Object.entries(values).forEach(([k, v]) => setField(form, k, v));
+  }
 }
 
 function setupPlayer() {
@@ -138,4 +178,4 @@ function setupPlayer() {
   }
 }
 
-document.addEventListener("DOMContentLoaded", () => { setupDrop(); setupProgress(); setupPlayer(); });
+document.addEventListener("DOMContentLoaded", () => { setupDrop(); setupForm(); setupProgress(); setupPlayer(); });

@@ -14,6 +14,8 @@ from flask_wtf.csrf import CSRFError, CSRFProtect
 from werkzeug.exceptions import HTTPException
 
 from converter.bundled import asset_dir, sample_path
+from webapp import limits, security
+from webapp.lease import InstanceLock
 
 ROOT = Path(__file__).resolve().parents[1]
 csrf = CSRFProtect()
@@ -28,13 +30,19 @@ DEFAULTS = {
     "FACESVG_MAX_UNZIPPED_MB": 1024,  # zip inputs expanding beyond this are refused
     "FACESVG_PREVIEW_FRAMES": 48,  # 3D prerender frames per job (spread evenly)
     "FACESVG_JOB_TIMEOUT": 3600,  # RQ job timeout in seconds
+    "FACESVG_LEASE_SECONDS": 30.0,  # a worker's claim on a job expires unless renewed within this time
+    "FACESVG_RETRIES": 1,  # a job whose worker died is re-queued this many times, then failed
+    "FACESVG_QUEUE_CAP": 200,  # queued + running jobs beyond which submissions get 503 (0: no cap)
+    "FACESVG_RATE_LIMIT": 30,  # submissions per minute per client (API key, session or address; 0: off)
+    "FACESVG_API_KEYS": "",  # comma-separated; when set the API needs a key and jobs are scoped to it
     "FACESVG_SAMPLE": str(sample_path()),
     "WTF_CSRF_TIME_LIMIT": None,  # tokens live as long as the session
 }
 ENV_KEYS = {  # FACESVG_* environment variables override defaults; explicit config overrides both
     "FACESVG_QUEUE": str, "FACESVG_WORKERS": int, "FACESVG_EXECUTOR": str, "FACESVG_RETENTION_HOURS": float,
     "FACESVG_CLEANUP_INTERVAL": float, "FACESVG_MAX_UNZIPPED_MB": int, "FACESVG_PREVIEW_FRAMES": int,
-    "FACESVG_STORAGE": str, "FACESVG_SAMPLE": str, "FACESVG_JOB_TIMEOUT": int,
+    "FACESVG_STORAGE": str, "FACESVG_SAMPLE": str, "FACESVG_JOB_TIMEOUT": int, "FACESVG_LEASE_SECONDS": float,
+    "FACESVG_RETRIES": int, "FACESVG_QUEUE_CAP": int, "FACESVG_RATE_LIMIT": int, "FACESVG_API_KEYS": str,
 }
 
 
@@ -58,6 +66,7 @@ def create_app(config: dict | None = None) -> Flask:
     app.config.update(config or {})
     instance = Path(app.instance_path)
     instance.mkdir(parents=True, exist_ok=True)
+    lock = InstanceLock(instance).acquire()  # before anything reads or recovers the job table (InstanceBusy)
     app.config.setdefault("FACESVG_STORAGE", str(instance / "jobs"))
     app.config.setdefault("FACESVG_DB", str(instance / "jobs.sqlite3"))
     if not app.config.get("SECRET_KEY"):
@@ -65,7 +74,12 @@ def create_app(config: dict | None = None) -> Flask:
 
     from webapp.jobs import make_queue
 
-    queue = make_queue(app.config)
+    try:
+        queue = make_queue(app.config)
+    except BaseException:
+        lock.release()
+        raise
+    queue.instance_lock = lock
     app.extensions["facesvg_queue"] = queue
     atexit.register(_close_quietly, queue)
     app.extensions["facesvg_cleanup"] = RetentionSweeper(queue, app.config)
@@ -79,7 +93,8 @@ def create_app(config: dict | None = None) -> Flask:
     app.register_blueprint(pages)
     app.register_blueprint(api, url_prefix="/api/v1")
     _register_errors(app)
-    app.after_request(_security_headers)
+    security.install(app)
+    limits.install(app)
     return app
 
 
@@ -148,16 +163,3 @@ def _register_errors(app: Flask) -> None:
         if wants_json():
             return jsonify(error=exc.description, status=exc.code), exc.code
         return render_template("error.html", code=exc.code, title=exc.name, message=exc.description), exc.code
-
-
-def _security_headers(response):
-    response.headers.setdefault("X-Content-Type-Options", "nosniff")
-    response.headers.setdefault("Referrer-Policy", "same-origin")
-    if response.mimetype == "text/html" and request.endpoint and not request.endpoint.startswith("static"):
-        response.headers.setdefault("X-Frame-Options", "SAMEORIGIN")
-        response.headers.setdefault(
-            "Content-Security-Policy",
-            "default-src 'self'; img-src 'self' data: blob:; object-src 'self'; frame-src 'self'; "
-            "frame-ancestors 'self'; form-action 'self'; base-uri 'none'",
-        )
-    return response

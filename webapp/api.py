@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
-from flask import Blueprint, abort, current_app, jsonify, request, send_file, url_for
+from flask import Blueprint, abort, current_app, g, jsonify, request, send_file, url_for
 
 from converter.errors import InputError
 from converter.outputs import OUTPUTS, output_files
+from webapp.eta import standing
 from webapp.jobstore import DONE, Job
+from webapp.messages import user_words
 from webapp.openapi import openapi_document
+from webapp.security import may_see
 from webapp.storage import is_job_id, result_files
 from webapp.submit import create_job, download_stem
 
@@ -23,7 +26,7 @@ def queue():
 def find_job(job_id: str) -> Job:
     """The job or a 404."""
     job = queue().get(job_id) if is_job_id(job_id) else None
-    if job is None:
+    if job is None or not may_see(job):
         abort(404, description=f"no job {job_id!r}; it may have been deleted or cleaned up.")
     return job
 
@@ -36,13 +39,14 @@ def job_json(job: Job) -> dict:
         "stage": job.stage,
         "progress": round(job.progress, 4),
         "percent": int(job.progress * 100),
-        "error": job.message if job.state == "failed" else None,
+        "error": user_words(job.message) if job.state == "failed" else None,
         "filename": job.filename,
         "input_kind": job.kind,
         "options": job.options,
         "created": job.created,
         "started": job.started,
         "finished": job.finished,
+        **standing(queue(), job),
         "links": {
             "self": url_for("api.get_job", job_id=job.id),
             "page": url_for("pages.job_page", job_id=job.id),
@@ -78,7 +82,14 @@ def list_jobs():
         limit = min(max(int(request.args.get("limit", 50)), 1), 500)
     except ValueError:
         abort(400, description="limit must be a whole number between 1 and 500.")
-    return jsonify(jobs=[job_json(j) for j in queue().recent(limit)])
+    return jsonify(jobs=[job_json(j) for j in visible_jobs(limit)])
+
+
+def visible_jobs(limit: int) -> list[Job]:
+    """The newest jobs the current client may see (all of them when API keys are off)."""
+    if not getattr(g, "client", ""):
+        return queue().recent(limit)
+    return [j for j in queue().recent(max(limit * 20, 500)) if may_see(j)][:limit]
 
 
 @api.post("/jobs")
@@ -86,9 +97,10 @@ def post_job():
     """Create a job from a multipart upload (field 'file', or sample=1) and option fields."""
     current_app.extensions["facesvg_cleanup"].maybe_run()
     try:
-        job = create_job(queue(), current_app.config, request.form, request.files, strict=True)
+        job = create_job(queue(), current_app.config, request.form, request.files, strict=True,
+                         client=getattr(g, "client", ""))
     except InputError as exc:
-        return jsonify(error=str(exc), status=400), 400
+        return jsonify(error=user_words(str(exc)), status=400), 400
     response = jsonify(job_json(queue().get(job.id) or job))
     response.status_code = 202
     response.headers["Location"] = url_for("api.get_job", job_id=job.id)
@@ -161,6 +173,7 @@ def _send(job: Job, kind: str):
     response = send_file(path, mimetype=media, as_attachment=download,
                          download_name=download_stem(job) + suffix, max_age=0)
     if kind == "svg":  # generated SVG shown inline: no scripts, no external loads
-        response.headers["Content-Security-Policy"] = "default-src 'none'; style-src 'unsafe-inline'; img-src data:"
+        response.headers["Content-Security-Policy"] = ("default-src 'none'; style-src 'unsafe-inline'; img-src data:; "
+                                                       "frame-ancestors 'self'")
     return response
 

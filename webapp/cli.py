@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 import os
 import signal
+import sys
+
+FORM_SLACK = 1 << 20  # room for the option fields and multipart framing beside the largest upload
 
 
 def register_cli(subparsers) -> None:
@@ -29,6 +32,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     import waitress
 
     from webapp import create_app
+    from webapp.lease import InstanceBusy
 
     config = {}
     if args.workers is not None:
@@ -37,12 +41,19 @@ def cmd_serve(args: argparse.Namespace) -> int:
         config["FACESVG_QUEUE"] = args.queue
     if args.instance:
         config["INSTANCE_PATH"] = os.path.abspath(args.instance)
-    app = create_app(config)
+    try:
+        app = create_app(config)
+    except InstanceBusy as exc:
+        print(f"facesvg serve: {exc}", file=sys.stderr, flush=True)
+        return 2
+    # waitress refuses a larger body as it reads it (a declared Content-Length at once, a chunked one on the way)
+    body_limit = int(app.config["MAX_CONTENT_LENGTH"]) + FORM_SLACK
     print(f"facesvg web UI on http://{args.host}:{args.port} ({app.extensions['facesvg_queue'].name} queue)",
           flush=True)
     signal.signal(signal.SIGTERM, _exit)
     try:
-        waitress.serve(app, host=args.host, port=args.port, threads=args.threads, ident="facesvg")
+        waitress.serve(app, host=args.host, port=args.port, threads=args.threads, ident="facesvg",
+                       max_request_body_size=body_limit)
     except KeyboardInterrupt:
         pass
     finally:
@@ -69,6 +80,9 @@ def cmd_worker(args: argparse.Namespace) -> int:
     from converter import convert, extract, render  # noqa: F401
 
     render._pyrender()
+    from webapp.warmup import warm_converter
+
+    warm_converter()  # JIT kernels compiled here are inherited by every work horse (no GL context is made)
     conn = Redis.from_url(args.queue)
     Worker([Queue("facesvg", connection=conn)], connection=conn).work(burst=args.burst)
     return 0

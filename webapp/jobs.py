@@ -8,20 +8,30 @@ its worker stops at the next progress step, then removes it.
 from __future__ import annotations
 
 import logging
-import multiprocessing
 import threading
 import time
-from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
-from webapp.jobstore import (CANCELLED, CANCELLING, FAILED, FINISHED, QUEUED, RUNNING, Job, JobStore, RedisStore,
-                             SQLiteStore)
+from webapp.jobstore import (
+    CANCELLED,
+    CANCELLING,
+    FAILED,
+    FINISHED,
+    QUEUED,
+    RUNNING,
+    Job,
+    JobStore,
+    RedisStore,
+    SQLiteStore,
+)
+from webapp.lease import expired, settle
 from webapp.runner import run_job
 from webapp.storage import Storage
+from webapp.workers import WorkerPool
 
 log = logging.getLogger("facesvg.webapp")
-MAX_ATTEMPTS = 2  # a job interrupted by a server stop is re-queued once, then marked failed
+RETRIES = 1  # a job whose worker died (crash, kill, server stop) is re-queued this many times, then failed
+LEASE_SECONDS = 30.0  # a worker's claim on a job lasts this long unless its heartbeat renews it
 
 
 class JobQueue:
@@ -31,6 +41,8 @@ class JobQueue:
         self.store = store
         self.storage = storage
         self.preview_frames = preview_frames
+        self.instance_lock = None  # set by the app: released when the queue closes
+        self.workers = 1
 
     name = "base"
 
@@ -85,6 +97,8 @@ class JobQueue:
     def close(self, wait: bool = True) -> None:
         """Stop accepting work and release resources (wait: let running jobs finish where the backend can)."""
         self.store.close()
+        if self.instance_lock is not None:
+            self.instance_lock.release()
 
     def _enqueue(self, job_id: str) -> None:
         raise NotImplementedError
@@ -94,124 +108,80 @@ class JobQueue:
 
 
 class EmbeddedQueue(JobQueue):
-    """Worker pool inside the server (processes by default) and the SQLite job table in the instance folder.
+    """Worker processes (or threads) beside the server, claiming jobs from the SQLite table in the instance folder.
 
-    On start, jobs left 'running' by a server that died are re-queued (once) or marked failed; queued ones
-    are resubmitted. Run one server process per instance folder (waitress is threaded; one process is right).
+    Start one server per instance folder (the instance lock enforces it). On start, jobs whose lease expired
+    (their worker died with a previous server) are re-queued while retries remain, else failed; jobs still
+    under a live lease are settled by the supervisor when it runs out.
     """
 
     name = "embedded"
 
     def __init__(self, db_path: str | Path, storage: Storage, workers: int = 2, executor: str = "process",
-                 preview_frames: int = 48) -> None:
+                 preview_frames: int = 48, lease_seconds: float = LEASE_SECONDS, retries: int = RETRIES) -> None:
         super().__init__(SQLiteStore(db_path), storage, preview_frames)
         self.workers = max(1, int(workers))
         self.kind = executor
-        self._lock = threading.Lock()
-        self._futures: dict[str, Future] = {}
-        self._closed = False
-        self._pool = self._new_pool()
+        self.lease_seconds, self.retries = float(lease_seconds), int(retries)
         self.recovered = self.recover()
-
-    def _new_pool(self) -> Executor:
-        if self.kind == "thread":
-            return ThreadPoolExecutor(self.workers, thread_name_prefix="facesvg-job")
-        # spawn, not fork: the server has threads, and each worker needs its own clean EGL context
-        return ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"))
+        self.pool = WorkerPool(self.store, storage, self.workers, executor, self.lease_seconds, self.retries,
+                               preview_frames)
 
     def recover(self) -> dict[str, list[str]]:
-        """Re-queue or fail jobs a previous server left running; resubmit queued ones."""
+        """Settle jobs a previous server left running whose lease has expired (queued ones just wait)."""
         requeued, failed = [], []
-        for job in self.store.with_state((RUNNING, CANCELLING)):
-            if job.state == CANCELLING:
+        for job in expired(self.store):
+            outcome = settle(self.store, job.id, job.owner, self.retries, "the server stopped while it ran")
+            if outcome == "requeued":
+                requeued.append(job.id)
+            elif outcome == "failed":
+                failed.append(job.id)
+            elif outcome == "cancelled":  # a DELETE arrived before the stop: finish it
                 self.store.remove(job.id)
                 self.storage.delete(job.id)
-            elif job.attempts < MAX_ATTEMPTS and self.store.transition(
-                    job.id, (RUNNING,), state=QUEUED, stage="re-queued after a server restart", progress=0.0):
-                requeued.append(job.id)
-            elif self.store.transition(job.id, (RUNNING,), state=FAILED, stage="failed", finished=time.time(),
-                                       message=f"the server stopped while this job was running "
-                                               f"({job.attempts} attempts); submit it again."):
-                failed.append(job.id)
-        for job in self.store.with_state((QUEUED,)):
-            self._enqueue(job.id)
         return {"requeued": requeued, "failed": failed}
 
     def _enqueue(self, job_id: str) -> None:
-        with self._lock:
-            if self._closed:
-                return
-            fut = self._pool.submit(run_job, job_id, self.store.url, str(self.storage.root), self.preview_frames)
-            self._futures[job_id] = fut
-        fut.add_done_callback(lambda f, j=job_id: self._finished(j, f))
-
-    def _dequeue(self, job_id: str) -> None:
-        fut = self._futures.get(job_id)
-        if fut is not None:
-            fut.cancel()
-
-    def _finished(self, job_id: str, fut: Future) -> None:
-        """A worker returned; if it crashed (not a conversion error, which run_job records), record that."""
-        with self._lock:
-            self._futures.pop(job_id, None)
-        if fut.cancelled() or self._closed:  # a shutdown, not a crash: the job is re-queued on restart
-            return
-        exc = fut.exception()
-        if exc is None:
-            return
-        log.error("worker for job %s crashed: %r", job_id, exc)
-        self.store.transition(job_id, (RUNNING, QUEUED), state=FAILED, stage="failed", finished=time.time(),
-                              message="the conversion process stopped unexpectedly (out of memory or a crash); "
-                                      "try smaller options or another file.")
-        if isinstance(exc, BrokenProcessPool):
-            self._restart_pool()
-
-    def _restart_pool(self) -> None:
-        with self._lock:
-            if self._closed:
-                return
-            old, self._pool = self._pool, self._new_pool()
-            pending = list(self._futures)
-            self._futures.clear()
-        old.shutdown(wait=False, cancel_futures=True)
-        for job_id in pending:
-            job = self.store.get(job_id)
-            if job is not None and job.state == QUEUED:
-                self._enqueue(job_id)
+        """Nothing to hand over: workers claim queued jobs from the table."""
 
     def close(self, wait: bool = True) -> None:
-        """Stop the pool and close the table; without wait, running workers are killed (re-queued on restart)."""
-        with self._lock:
-            self._closed = True
-        processes = list((getattr(self._pool, "_processes", None) or {}).values())
-        self._pool.shutdown(wait=wait, cancel_futures=True)
-        for proc in processes if not wait else ():
-            proc.terminate()
+        """Stop the workers and close the table; without wait, running workers are killed (re-queued on restart)."""
+        if getattr(self, "pool", None) is not None:
+            self.pool.close(wait=wait)
         super().close()
 
 
 class RQQueue(JobQueue):
     """Jobs on an RQ queue in Redis, records in Redis, results in a storage folder every worker shares.
 
-    Workers run `facesvg worker --queue redis://... --storage FOLDER` (or `rq worker facesvg`) on any machine.
+    Workers run `facesvg worker --queue redis://...` on any machine sharing the storage folder. RQ kills a work
+    horse past the job timeout; our lease (renewed by the horse's heartbeat) tells the server's reaper which
+    jobs lost their worker, and it re-queues each once (RETRIES) or fails it, as the embedded backend does.
     """
 
     name = "rq"
 
     def __init__(self, url: str, storage: Storage, queue_name: str = "facesvg", job_timeout: int = 3600,
-                 preview_frames: int = 48) -> None:
+                 preview_frames: int = 48, lease_seconds: float = LEASE_SECONDS, retries: int = RETRIES) -> None:
         from redis import Redis
         from rq import Queue
 
         super().__init__(RedisStore(url, prefix=queue_name), storage, preview_frames)
         self.url = url
         self.job_timeout = job_timeout
+        self.lease_seconds, self.retries = float(lease_seconds), int(retries)
         self.connection = Redis.from_url(url)
         self.queue = Queue(queue_name, connection=self.connection)
+        self._stop = threading.Event()
+        self._reaper = threading.Thread(target=self._reap_loop, name="facesvg-rq-reaper", daemon=True)
+        self._reaper.start()
 
     def _enqueue(self, job_id: str) -> None:
+        job = self.store.get(job_id)
+        rq_id = job_id if job is None or not job.attempts else f"{job_id}-retry{job.attempts}"
         self.queue.enqueue(run_job, job_id, self.url, str(self.storage.root), self.preview_frames,
-                           job_id=job_id, job_timeout=self.job_timeout, result_ttl=600, failure_ttl=86400)
+                           self.lease_seconds, job_id=rq_id, job_timeout=self.job_timeout, result_ttl=600,
+                           failure_ttl=86400)
 
     def _dequeue(self, job_id: str) -> None:
         from rq.job import Job as RQJob
@@ -221,10 +191,31 @@ class RQQueue(JobQueue):
         except Exception:  # already taken, finished or expired: the worker's claim skips cancelled jobs anyway
             pass
 
+    def reap(self) -> list[str]:
+        """Settle jobs whose horse stopped renewing the lease; re-queued ones go back on the RQ queue."""
+        settled = []
+        for job in expired(self.store):
+            outcome = settle(self.store, job.id, job.owner, self.retries, "its worker stopped answering")
+            if outcome == "requeued":
+                self._enqueue(job.id)
+            elif outcome == "cancelled":
+                self.store.remove(job.id)
+                self.storage.delete(job.id)
+            if outcome:
+                settled.append(job.id)
+        return settled
+
+    def _reap_loop(self) -> None:
+        while not self._stop.wait(max(self.lease_seconds / 4, 0.25)):
+            try:
+                self.reap()
+            except Exception as exc:  # Redis restarting: keep trying
+                log.warning("rq reaper: %r", exc)
+
     def get(self, job_id: str) -> Job | None:
-        """The record; a job whose RQ worker died (RQ marks it failed) is recorded as failed."""
+        """The record; a never-started job RQ could not run (its worker failed it) is recorded as failed."""
         job = self.store.get(job_id)
-        if job is not None and job.state in (QUEUED, RUNNING, CANCELLING):
+        if job is not None and job.state == QUEUED and not job.attempts:
             from rq.exceptions import NoSuchJobError
             from rq.job import Job as RQJob
 
@@ -232,15 +223,15 @@ class RQQueue(JobQueue):
                 status = RQJob.fetch(job_id, connection=self.connection).get_status(refresh=True)
             except NoSuchJobError:
                 status = None
-            if status is not None and str(getattr(status, "value", status)) in ("failed", "stopped", "canceled"):
-                if self.store.transition(job_id, (QUEUED, RUNNING), state=FAILED, stage="failed",
-                                         finished=time.time(),
-                                         message="the worker running this job stopped (crash or timeout); "
-                                                 "submit it again."):
+            if status is not None and str(getattr(status, "value", status)) in ("failed", "stopped"):
+                if self.store.transition(job_id, (QUEUED,), state=FAILED, stage="failed", finished=time.time(),
+                                         message="the worker could not start this job; submit it again."):
                     job = self.store.get(job_id)
         return job
 
     def close(self, wait: bool = True) -> None:
+        self._stop.set()
+        self._reaper.join(timeout=5)
         super().close()
         self.connection.close()
 
@@ -250,10 +241,13 @@ def make_queue(config: dict) -> JobQueue:
     storage = Storage(config["FACESVG_STORAGE"])
     url = config.get("FACESVG_QUEUE") or "embedded"
     previews = int(config.get("FACESVG_PREVIEW_FRAMES", 48))
+    lease = float(config.get("FACESVG_LEASE_SECONDS", LEASE_SECONDS))
+    retries = int(config.get("FACESVG_RETRIES", RETRIES))
     if url.startswith(("redis://", "rediss://", "unix://")):
         return RQQueue(url, storage, job_timeout=int(config.get("FACESVG_JOB_TIMEOUT", 3600)),
-                       preview_frames=previews)
+                       preview_frames=previews, lease_seconds=lease, retries=retries)
     if url != "embedded":
         raise ValueError(f"FACESVG_QUEUE must be 'embedded' or a redis:// URL, got {url!r}")
     return EmbeddedQueue(Path(config["FACESVG_DB"]), storage, workers=int(config.get("FACESVG_WORKERS", 2)),
-                         executor=config.get("FACESVG_EXECUTOR", "process"), preview_frames=previews)
+                         executor=config.get("FACESVG_EXECUTOR", "process"), preview_frames=previews,
+                         lease_seconds=lease, retries=retries)

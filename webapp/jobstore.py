@@ -31,6 +31,9 @@ class Job:
     finished: float | None = None
     attempts: int = 0
     result: dict = field(default_factory=dict)  # report, frames, fps, preview frames, output kinds
+    owner: str = ""  # the worker holding the job while running (empty otherwise)
+    lease: float = 0.0  # the holder's claim expires at this time unless renewed (heartbeat)
+    client: str = ""  # who submitted it (API key id or browser session id; empty when keys are off)
 
     def to_json(self) -> dict:
         """Plain dict of the record."""
@@ -58,8 +61,8 @@ class JobStore:
         """The newest records first."""
         raise NotImplementedError
 
-    def transition(self, job_id: str, from_states: tuple[str, ...], **changes) -> bool:
-        """Apply changes only if the job's state is one of from_states; True if applied."""
+    def transition(self, job_id: str, from_states: tuple[str, ...], holder: str | None = None, **changes) -> bool:
+        """Apply changes only if the job's state is one of from_states (and, given holder, its owner is holder)."""
         raise NotImplementedError
 
     def remove(self, job_id: str) -> None:
@@ -70,13 +73,25 @@ class JobStore:
         """Records in any of the states, oldest first."""
         raise NotImplementedError
 
-    def claim(self, job_id: str) -> bool:
-        """Atomically move a queued job to running (a worker takes it); False if it was not queued."""
+    def claim(self, job_id: str, owner: str = "", lease_seconds: float = 60.0) -> bool:
+        """Atomically move a queued job to running, held by owner until the lease expires; False if not queued."""
         job = self.get(job_id)
-        if job is None:
+        if job is None or job.state != QUEUED:
             return False
-        return self.transition(job_id, (QUEUED,), state=RUNNING, stage="starting", started=time.time(),
-                               attempts=job.attempts + 1)
+        now = time.time()
+        return self.transition(job_id, (QUEUED,), state=RUNNING, stage="starting", started=now,
+                               attempts=job.attempts + 1, owner=owner, lease=now + lease_seconds)
+
+    def claim_next(self, owner: str, lease_seconds: float) -> str | None:
+        """Claim the oldest queued job for owner; its id, or None when nothing is queued."""
+        for job in self.with_state((QUEUED,)):
+            if self.claim(job.id, owner, lease_seconds):
+                return job.id
+        return None
+
+    def count_active(self) -> int:
+        """How many jobs are queued or running."""
+        return len(self.with_state((QUEUED, RUNNING)))
 
     def finished_before(self, cutoff: float) -> list[str]:
         """Ids of finished jobs older than cutoff (seconds since the epoch)."""
@@ -100,9 +115,16 @@ class SQLiteStore(JobStore):
             db.execute(
                 "CREATE TABLE IF NOT EXISTS jobs (id TEXT PRIMARY KEY, state TEXT, stage TEXT, progress REAL, "
                 "message TEXT, filename TEXT, kind TEXT, options TEXT, files TEXT, created REAL, started REAL, "
-                "finished REAL, attempts INTEGER, result TEXT)"
+                "finished REAL, attempts INTEGER, result TEXT, owner TEXT DEFAULT '', lease REAL DEFAULT 0, "
+                "client TEXT DEFAULT '')"
             )
+            have = {r[1] for r in db.execute("PRAGMA table_info(jobs)")}
+            for column, decl in (("owner", "TEXT DEFAULT ''"), ("lease", "REAL DEFAULT 0"),
+                                 ("client", "TEXT DEFAULT ''")):
+                if column not in have:  # a table written before leases existed
+                    db.execute(f"ALTER TABLE jobs ADD COLUMN {column} {decl}")
             db.execute("CREATE INDEX IF NOT EXISTS jobs_created ON jobs (created)")
+            db.execute("CREATE INDEX IF NOT EXISTS jobs_state ON jobs (state)")
 
     def _conn(self) -> sqlite3.Connection:
         conn = getattr(self._local, "conn", None)
@@ -125,6 +147,7 @@ class SQLiteStore(JobStore):
         data = {k: row[k] for k in COLUMNS}
         for k in JSON_COLUMNS:
             data[k] = json.loads(data[k] or "{}")
+        data["owner"], data["lease"], data["client"] = data["owner"] or "", data["lease"] or 0.0, data["client"] or ""
         return Job(**data)
 
     def add(self, job: Job) -> None:
@@ -142,17 +165,31 @@ class SQLiteStore(JobStore):
         rows = self._conn().execute("SELECT * FROM jobs ORDER BY created DESC LIMIT ?", (int(limit),)).fetchall()
         return [self._job(r) for r in rows]
 
-    def transition(self, job_id: str, from_states: tuple[str, ...], **changes) -> bool:
+    def transition(self, job_id: str, from_states: tuple[str, ...], holder: str | None = None, **changes) -> bool:
         bad = set(changes) - set(COLUMNS)
         if bad:
             raise KeyError(f"unknown job fields {sorted(bad)}")
         sets = ", ".join(f"{k} = ?" for k in changes)
         marks = ", ".join("?" * len(from_states))
+        owned = "" if holder is None else " AND owner = ?"
         cur = self._conn().execute(
-            f"UPDATE jobs SET {sets} WHERE id = ? AND state IN ({marks})",
-            [self._encode(k, v) for k, v in changes.items()] + [job_id, *from_states],
+            f"UPDATE jobs SET {sets} WHERE id = ? AND state IN ({marks}){owned}",
+            [self._encode(k, v) for k, v in changes.items()] + [job_id, *from_states]
+            + ([] if holder is None else [holder]),
         )
         return cur.rowcount == 1
+
+    def claim_next(self, owner: str, lease_seconds: float) -> str | None:
+        now = time.time()
+        row = self._conn().execute(
+            "UPDATE jobs SET state = ?, stage = 'starting', started = ?, attempts = attempts + 1, owner = ?, "
+            "lease = ? WHERE id = (SELECT id FROM jobs WHERE state = ? ORDER BY created LIMIT 1) AND state = ? "
+            "RETURNING id", (RUNNING, now, owner, now + lease_seconds, QUEUED, QUEUED)).fetchall()
+        return row[0][0] if row else None
+
+    def count_active(self) -> int:
+        return int(self._conn().execute("SELECT COUNT(*) FROM jobs WHERE state IN (?, ?)",
+                                        (QUEUED, RUNNING)).fetchone()[0])
 
     def remove(self, job_id: str) -> None:
         self._conn().execute("DELETE FROM jobs WHERE id = ?", (job_id,))
@@ -170,10 +207,13 @@ class SQLiteStore(JobStore):
         self._local = threading.local()
 
 
-# Compare-and-set on a hash field: KEYS[1] = job hash; ARGV = n, n allowed states, then field/value pairs.
+# Compare-and-set on a hash field: KEYS[1] = job hash; ARGV = required owner ('' = any), n, n allowed states,
+# then field/value pairs (values JSON-encoded, as stored).
 _TRANSITION_LUA = """
 local s = redis.call('HGET', KEYS[1], 'state')
 if not s then return 0 end
+if ARGV[1] ~= '' and redis.call('HGET', KEYS[1], 'owner') ~= ARGV[1] then return 0 end
+table.remove(ARGV, 1)
 local n = tonumber(ARGV[1])
 for i = 2, n + 1 do
   if ARGV[i] == s then
@@ -229,11 +269,11 @@ class RedisStore(JobStore):
     def recent(self, limit: int = 50) -> list[Job]:
         return self._many(self.redis.zrevrange(self._index, 0, int(limit) - 1))
 
-    def transition(self, job_id: str, from_states: tuple[str, ...], **changes) -> bool:
+    def transition(self, job_id: str, from_states: tuple[str, ...], holder: str | None = None, **changes) -> bool:
         bad = set(changes) - set(COLUMNS)
         if bad:
             raise KeyError(f"unknown job fields {sorted(bad)}")
-        args = [len(from_states), *(json.dumps(s) for s in from_states)]
+        args = ["" if holder is None else json.dumps(holder), len(from_states), *(json.dumps(s) for s in from_states)]
         for k, v in changes.items():
             args += [k, json.dumps(v)]
         return bool(self._transition(keys=[self._key(job_id)], args=args))

@@ -83,7 +83,11 @@ def openapi_document() -> dict:
                              "type": "object", "properties": upload_props}}}},
                          "responses": {"202": _job_response("queued; Location names the job"),
                                        "400": _error("bad input or options (message says what to fix)"),
-                                       "413": _error("upload larger than the limit")}},
+                                       "401": _error("API keys are on and none (or a wrong one) was sent"),
+                                       "403": _error("sent by a page of another web site"),
+                                       "413": _error("upload larger than the limit"),
+                                       "429": _error("too many submissions from this client; see Retry-After"),
+                                       "503": _error("the queue is full; see Retry-After")}},
             },
             "/jobs/{job_id}": {
                 "parameters": [JOB_ID],
@@ -120,7 +124,12 @@ def openapi_document() -> dict:
                                       "404": _error("no such job or frame"), "409": _error("not done")}},
             },
         },
-        "components": {"schemas": {
+        "components": {"securitySchemes": {"apiKey": {
+            "type": "http", "scheme": "bearer",
+            "description": "When the server sets FACESVG_API_KEYS, send a key as 'Authorization: Bearer KEY' (or "
+                           "'X-API-Key: KEY'); each key then sees and deletes only its own jobs. Requests a "
+                           "browser sends from another web site are refused (403)."}},
+            "schemas": {
             "Error": {"type": "object", "properties": {"error": {"type": "string"}, "status": {"type": "integer"}}},
             "Job": {"type": "object", "properties": {
                 "id": {"type": "string"},
@@ -131,6 +140,11 @@ def openapi_document() -> dict:
                 "input_kind": {"type": "string"}, "options": {"type": "object", "properties": _option_schema()},
                 "created": {"type": "number"}, "started": {"type": ["number", "null"]},
                 "finished": {"type": ["number", "null"]},
+                "queue_position": {"type": ["integer", "null"],
+                                   "description": "1 for the next job to start; null unless queued"},
+                "eta_seconds": {"type": ["number", "null"],
+                                "description": "estimated seconds until done, from the stage progress and recent "
+                                               "jobs; null when finished"},
                 "result": {"type": "object", "description": "report, frames, fps, duration, preview_frames, "
                                                             "outputs (bytes per kind)"},
                 "links": {"type": "object"}}},

@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
-from flask import Blueprint, abort, current_app, flash, redirect, render_template, request, url_for
+from flask import Blueprint, abort, current_app, flash, g, redirect, render_template, request, url_for
 
 from converter.errors import InputError
 from converter.options import option_fields
 from converter.outputs import choices, output_files
+from webapp.eta import standing
 from webapp.jobstore import DONE
+from webapp.messages import user_words
+from webapp.openapi import openapi_document
+from webapp.presets import PRESETS, estimate_sizes
+from webapp.security import may_see
 from webapp.storage import is_job_id
-from webapp.submit import create_job
+from webapp.submit import OPTION_FIELDS, create_job
 
 pages = Blueprint("pages", __name__)
 
@@ -28,7 +33,7 @@ def when(ts: float | None) -> str:
     """A UTC timestamp for display."""
     if not ts:
         return "—"
-    return datetime.fromtimestamp(ts, timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+    return datetime.fromtimestamp(ts, UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
 
 
 @pages.app_template_filter("kb")
@@ -63,12 +68,63 @@ def form_fields() -> list[dict]:
     return out
 
 
+@pages.app_template_filter("duration")
+def duration(seconds: float | None) -> str:
+    """An estimate in words: 'about 40 s', 'about 3 min'."""
+    if seconds is None:
+        return "—"
+    if seconds < 90:
+        return f"about {max(int(round(seconds)), 1)} s"
+    return f"about {int(round(seconds / 60))} min"
+
+
+def _defaults() -> dict:
+    return {spec.name: spec.default for spec in option_fields()}
+
+
+def _form(status: int = 200, error: str | None = None, refill: dict | None = None):
+    """The upload page, its fields filled from refill (a failed job's options or the form just sent)."""
+    controls = form_fields()
+    for control in controls:
+        if refill and control["name"] in refill and control["widget"] != "file":
+            control["value"] = refill[control["name"]]
+    return render_template("upload.html", fields=controls, refill=refill or {}, accept=ACCEPT, error=error,
+                           presets=PRESETS, recent=_visible(8),
+                           max_mb=current_app.config["MAX_CONTENT_LENGTH"] // (1 << 20)), status
+
+
+def _visible(limit: int) -> list:
+    """Recent jobs this browser may see (all when API keys are off)."""
+    if not getattr(g, "client", ""):
+        return queue().recent(limit)
+    return [j for j in queue().recent(max(limit * 20, 500)) if may_see(j)][:limit]
+
+
+def _sent_options() -> dict:
+    """The scalar options of the form just submitted, as typed (to show them again with an error)."""
+    out = {}
+    for key in request.form.keys():
+        name = key.replace("-", "_")
+        if name in OPTION_FIELDS:
+            value = request.form.getlist(key)[-1]
+            out[name] = {"0": False, "1": True}.get(value, value) if value in ("0", "1") and \
+                isinstance(_defaults().get(name), bool) else value
+    return out
+
+
 @pages.get("/")
 def index():
-    """The upload page."""
-    return render_template("upload.html", fields=form_fields(), accept=ACCEPT,
-                           recent=queue().recent(8),
-                           max_mb=current_app.config["MAX_CONTENT_LENGTH"] // (1 << 20))
+    """The upload page; ?retry=JOB refills the form with that job's options ("Try again")."""
+    refill = None
+    retry = request.args.get("retry", "")
+    if is_job_id(retry):
+        job = queue().get(retry)
+        if job is not None and may_see(job):
+            refill = {k: v for k, v in job.options.items() if k in OPTION_FIELDS}
+    preset = PRESETS.get(request.args.get("preset", ""))
+    if preset:
+        refill = {**(refill or {}), **preset[1]}
+    return _form(refill=refill)
 
 
 @pages.post("/jobs")
@@ -76,36 +132,43 @@ def submit():
     """Form submission: queue the job and go to its page (303), or show the form again with the error."""
     current_app.extensions["facesvg_cleanup"].maybe_run()
     try:
-        job = create_job(queue(), current_app.config, request.form, request.files)
+        job = create_job(queue(), current_app.config, request.form, request.files, client=getattr(g, "client", ""))
     except InputError as exc:
-        return render_template("upload.html", fields=form_fields(), accept=ACCEPT, error=str(exc),
-                               recent=queue().recent(8),
-                               max_mb=current_app.config["MAX_CONTENT_LENGTH"] // (1 << 20)), 400
+        return _form(400, error=user_words(str(exc)), refill=_sent_options())
     return redirect(url_for("pages.job_page", job_id=job.id), code=303)
+
+
+@pages.get("/docs/api")
+def api_docs():
+    """The OpenAPI document of /api/v1 as a readable page."""
+    return render_template("api.html", doc=openapi_document())
 
 
 @pages.get("/jobs")
 def jobs():
     """Recent jobs."""
-    return render_template("jobs.html", jobs=queue().recent(100))
+    return render_template("jobs.html", jobs=_visible(100))
 
 
 @pages.get("/jobs/<job_id>")
 def job_page(job_id: str):
     """Progress while queued/running, the error when failed, the result player when done."""
     job = queue().get(job_id) if is_job_id(job_id) else None
-    if job is None:
+    if job is None or not may_see(job):
         abort(404, description="There is no such job; it may have been deleted or cleaned up.")
     kinds = queue().storage.available(job.id) if job.state == DONE else []
     labels = {**{key: f.label for key, f in output_files().items()}, "report": "Report (JSON)"}
-    return render_template("job.html", job=job, kinds=kinds, labels=labels)
+    return render_template("job.html", job=job, kinds=kinds, labels=labels, standing=standing(queue(), job),
+                           error=user_words(job.message) if job.message else "",
+                           estimates=estimate_sizes(job) if job.state == DONE else [])
 
 
 @pages.post("/jobs/<job_id>/delete")
 def delete(job_id: str):
     """Delete (or cancel) a job from its page."""
-    if not is_job_id(job_id):
-        abort(404)
+    job = queue().get(job_id) if is_job_id(job_id) else None
+    if job is None or not may_see(job):
+        abort(404, description="There is no such job.")
     outcome = queue().delete(job_id)
     if outcome is None:
         abort(404, description="There is no such job.")

@@ -24,6 +24,8 @@ from converter.outputs import output_kind
 from converter.userfiles import write_atomic
 from converter.verify import verify_animation
 from webapp.jobstore import CANCELLING, DONE, FAILED, RUNNING, Job, JobStore, open_store
+from webapp.lease import Heartbeat, die_with_parent, new_owner
+from webapp.messages import user_words
 from webapp.storage import Storage, result_files
 
 log = logging.getLogger("facesvg.webapp")
@@ -36,63 +38,118 @@ class JobCancelled(Exception):
     """The job was asked to stop (DELETE while running)."""
 
 
-def run_job(job_id: str, store_url: str, storage_root: str, preview_frames: int = 48) -> str:
-    """Run one queued job to its end state; returns the final state. Entry point of every worker."""
+class ClaimLost(Exception):
+    """This worker no longer holds the job (its lease ran out and someone else settled it)."""
+
+
+def run_job(job_id: str, store_url: str, storage_root: str, preview_frames: int = 48,
+            lease_seconds: float = 60.0) -> str:
+    """Claim one queued job and run it to its end state; returns the outcome. Entry point of RQ work horses."""
+    die_with_parent(os.getppid())  # an RQ work horse stops with its worker (kill -9 of the worker included)
     store = open_store(store_url)
+    owner = new_owner("rq")
     try:
-        return _run(store, Storage(storage_root), job_id, preview_frames)
+        if not store.claim(job_id, owner, lease_seconds):
+            return "skipped"  # cancelled, deleted, or taken by another worker
+        return execute(store, Storage(storage_root), job_id, owner, lease_seconds, preview_frames,
+                       parent_pid=os.getppid())
     finally:
         store.close()
 
 
-def _run(store: JobStore, storage: Storage, job_id: str, preview_frames: int) -> str:
-    if not store.claim(job_id):
-        return "skipped"  # cancelled, deleted, or taken by another worker
+def execute(store: JobStore, storage: Storage, job_id: str, owner: str, lease_seconds: float,
+            preview_frames: int = 48, parent_pid: int | None = None) -> str:
+    """Run a job this worker has claimed (as owner), renewing its lease; every write is conditional on owning it."""
     job = store.get(job_id)
-    progress = ProgressRecorder(store, job_id)
-    try:
-        result = perform(job, storage, progress, preview_frames)
-    except JobCancelled:
+    if job is None or job.owner != owner:
+        return "lost"
+    with Heartbeat(store, job_id, owner, lease_seconds, parent_pid) as beat:
+        progress = ProgressRecorder(store, job_id, owner=owner, lost=beat.lost)
+        try:
+            result = perform(job, storage, progress, preview_frames)
+        except JobCancelled:
+            return _cancelled(store, storage, job_id, owner)
+        except ClaimLost:
+            return _discard(storage, job_id, owner, "claim lost while converting")
+        except FacesvgError as exc:
+            return _fail(store, storage, job_id, owner, user_words(str(exc)))
+        except Exception as exc:  # a bug or a resource failure: keep the server alive, tell the user plainly
+            log.error("job %s failed:\n%s", job_id, traceback.format_exc())
+            return _fail(store, storage, job_id, owner,
+                         f"the conversion failed unexpectedly ({type(exc).__name__}: {exc}).")
+        if store.transition(job_id, (RUNNING,), holder=owner, state=DONE, stage="done", progress=1.0,
+                            finished=time.time(), result=result, owner="", lease=0.0):
+            record_event(storage, job_id, f"done {owner}")
+            return DONE
+        return _after_lost_transition(store, storage, job_id, owner)
+
+
+def _fail(store: JobStore, storage: Storage, job_id: str, owner: str, message: str) -> str:
+    if store.transition(job_id, (RUNNING,), holder=owner, state=FAILED, stage="failed", message=message,
+                        finished=time.time(), owner="", lease=0.0):
+        record_event(storage, job_id, f"failed {owner}")
+        return FAILED
+    return _after_lost_transition(store, storage, job_id, owner)
+
+
+def _after_lost_transition(store: JobStore, storage: Storage, job_id: str, owner: str) -> str:
+    """A final write was refused: either a DELETE asked us to stop (we still own it) or our claim is gone."""
+    job = store.get(job_id)
+    if job is not None and job.state == CANCELLING and job.owner == owner:
+        return _cancelled(store, storage, job_id, owner)
+    return _discard(storage, job_id, owner, "claim lost before recording")
+
+
+def _cancelled(store: JobStore, storage: Storage, job_id: str, owner: str) -> str:
+    """DELETE arrived while we ran it: finish that explicit delete (only while we still hold the job)."""
+    if store.transition(job_id, (CANCELLING,), holder=owner, state="cancelled", owner="", finished=time.time()):
         store.remove(job_id)
         storage.delete(job_id)
         return "cancelled"
-    except FacesvgError as exc:
-        return _fail(store, storage, job_id, str(exc))
-    except Exception as exc:  # a bug or a resource failure: keep the server alive, tell the user plainly
-        log.error("job %s failed:\n%s", job_id, traceback.format_exc())
-        return _fail(store, storage, job_id, f"the conversion failed unexpectedly ({type(exc).__name__}: {exc}).")
-    if store.transition(job_id, (RUNNING,), state=DONE, stage="done", progress=1.0, finished=time.time(),
-                        result=result):
-        return DONE
-    store.remove(job_id)  # cancelled while finishing
-    storage.delete(job_id)
-    return "cancelled"
+    return _discard(storage, job_id, owner, "claim lost while cancelling")
 
 
-def _fail(store: JobStore, storage: Storage, job_id: str, message: str) -> str:
-    if store.transition(job_id, (RUNNING,), state=FAILED, stage="failed", message=message, finished=time.time()):
-        return FAILED
-    store.remove(job_id)
-    storage.delete(job_id)
-    return "cancelled"
+def _discard(storage: Storage, job_id: str, owner: str, why: str) -> str:
+    """Our claim was lost: leave the job to whoever holds it now; touch nothing but the event log."""
+    log.warning("job %s: %s (%s); result discarded", job_id, why, owner)
+    record_event(storage, job_id, f"discarded {owner}")
+    return "lost"
+
+
+def record_event(storage: Storage, job_id: str, line: str) -> None:
+    """Append one line to the job's event log (who finished it; read by the fault tests and operators)."""
+    folder = storage.job_dir(job_id)
+    if not folder.is_dir():
+        return
+    with open(folder / "events.log", "a", encoding="utf-8") as fh:
+        fh.write(f"{time.time():.3f} {line}\n")
 
 
 class ProgressRecorder:
     """Progress callback that writes (stage, fraction) to the store at most every 0.2 s and checks for cancel."""
 
-    def __init__(self, store: JobStore, job_id: str, interval: float = 0.2) -> None:
+    def __init__(self, store: JobStore, job_id: str, interval: float = 0.2, owner: str | None = None,
+                 lost=None) -> None:
         self.store, self.job_id, self.interval = store, job_id, interval
+        self.owner, self.lost = owner, lost
         self.last = 0.0
 
     def __call__(self, stage: str, fraction: float) -> None:
+        if self.lost is not None and self.lost.is_set():
+            raise ClaimLost()
         now = time.monotonic()
         if now - self.last < self.interval and fraction < 1.0:
             return
         self.last = now
         fraction = float(min(max(fraction, 0.0), 1.0))
-        if not self.store.transition(self.job_id, (RUNNING,), stage=stage, progress=round(fraction, 4)):
+        if not self.store.transition(self.job_id, (RUNNING,), holder=self.owner, stage=stage,
+                                     progress=round(fraction, 4)):
             job = self.store.get(self.job_id)
-            if job is None or job.state == CANCELLING:
+            if job is None:
+                raise JobCancelled()
+            if self.owner is not None and job.owner != self.owner:
+                raise ClaimLost()
+            if job.state == CANCELLING:
                 raise JobCancelled()
 
 

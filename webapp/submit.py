@@ -12,6 +12,7 @@ from converter.errors import InputError
 from converter.options import ConversionOptions, option_fields
 from converter.outputs import output_kind
 from webapp.jobstore import Job
+from webapp.limits import check_options
 from webapp.storage import new_job_id
 from webapp.uploads import EXTRA_FIELDS, check_extra, check_main_input, stored_name
 
@@ -37,9 +38,11 @@ def _present(upload: FileStorage | None) -> bool:
     return upload is not None and bool(upload.filename)
 
 
-def create_job(queue, config, form: ImmutableMultiDict, files: ImmutableMultiDict, strict: bool = False) -> Job:
+def create_job(queue, config, form: ImmutableMultiDict, files: ImmutableMultiDict, strict: bool = False,
+               client: str = "") -> Job:
     """Validate options and uploads, store them under generated names, queue the job; InputError if bad."""
     options = parse_options(form, strict)
+    check_options(options)
     use_sample = form.get("sample", "") in ("1", "true", "on", "yes")
     upload = files.get("file")
     if not use_sample and not _present(upload):
@@ -82,7 +85,7 @@ def create_job(queue, config, form: ImmutableMultiDict, files: ImmutableMultiDic
     except BaseException:
         storage.delete(job_id)
         raise
-    job = Job(id=job_id, filename=display_name(filename), kind=kind, options=options, files=stored)
+    job = Job(id=job_id, filename=display_name(filename), kind=kind, options=options, files=stored, client=client)
     queue.submit(job)
     return job
 

@@ -165,3 +165,42 @@ def test_try_the_bundled_sample_is_one_click(browser, server, artifacts):
     assert page.locator("table.jobs tbody tr").count() == 1
     page.screenshot(path=str(artifacts / "web_jobs.png"))
     page.close()
+
+
+def test_preset_refill_delete_confirmation_and_same_origin_player(browser, server):
+    """The mobile preset fills its fields, "Try again" refills the form, the pages raise no CSP violation,
+    the fap2d player refuses a package from another origin, and deleting asks first."""
+    import time
+
+    from webapp.jobstore import Job
+
+    q = server.app.extensions["facesvg_queue"]
+    q.store.add(Job(id="f" * 32, state="failed", created=time.time(), message="broken; see --max-triangles.",
+                    options={"size": 333, "shading": "gouraud", "max_triangles": 700}))
+    page = browser.new_page(viewport={"width": 1024, "height": 800})
+    violations = []
+    page.on("console", lambda m: violations.append(m.text) if "Content Security Policy" in m.text else None)
+    try:
+        page.goto(server.url + "/")
+        page.click("#preset-mobile")
+        assert page.input_value("#opt-size") == "256" and page.input_value("#opt-max_triangles") == "1500"
+        page.goto(server.url + "/jobs/" + "f" * 32)
+        assert "“Triangle budget”" in page.text_content("#job-error")
+        page.click("#try-again")
+        assert page.input_value("#opt-size") == "333" and page.input_value("#opt-max_triangles") == "700"
+        assert page.input_value("#opt-shading") == "gouraud"  # a select, refilled by the page script
+        page.goto(server.url + "/jobs/" + "f" * 32)
+        assert not page.is_visible("#delete-yes")  # one click shows the question, a second one deletes
+        page.click("#delete-confirm summary")
+        page.click("#delete-yes")
+        page.wait_for_url(server.url + "/jobs")
+        assert q.get("f" * 32) is None
+        page.goto(server.url + "/static/fap2d.html?src=http://example.com/evil.zip")
+        page.wait_for_function("() => document.getElementById('status').textContent.startsWith('Refused')")
+        page.goto(server.url + "/static/fap2d.html?src=//example.com/evil.zip")
+        page.wait_for_function("() => document.getElementById('status').textContent.startsWith('Refused')")
+        page.goto(server.url + "/docs/api")
+        assert page.is_visible("#createJob")
+        assert violations == []
+    finally:
+        page.close()

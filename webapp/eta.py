@@ -1,0 +1,41 @@
+"""Where a job stands: its place in the queue and an estimate of when it will be done."""
+
+from __future__ import annotations
+
+import time
+
+from webapp.jobstore import DONE, QUEUED, RUNNING, Job
+
+DEFAULT_SECONDS = 20.0  # a job's duration before any has finished on this server
+
+
+def typical_duration(jobs: list[Job]) -> float:
+    """The median run time of recent finished jobs (seconds), or a default before there are any."""
+    took = sorted(j.finished - j.started for j in jobs if j.state == DONE and j.started and j.finished)
+    return took[len(took) // 2] if took else DEFAULT_SECONDS
+
+
+def remaining(job: Job, typical: float, now: float | None = None) -> float:
+    """Seconds a running job still needs, from the progress the converter reported (or the typical duration)."""
+    now = time.time() if now is None else now
+    elapsed = max(now - (job.started or now), 0.0)
+    if job.progress >= 0.05:
+        return max(elapsed / job.progress * (1.0 - job.progress), 0.0)
+    return max(typical - elapsed, 1.0)
+
+
+def standing(queue, job: Job) -> dict:
+    """{'queue_position': 1-based place among queued jobs or None, 'eta_seconds': estimate or None}."""
+    if job.state not in (QUEUED, RUNNING):
+        return {"queue_position": None, "eta_seconds": None}
+    typical = typical_duration(queue.recent(30))
+    if job.state == RUNNING:
+        return {"queue_position": None, "eta_seconds": round(remaining(job, typical), 1)}
+    queued = queue.store.with_state((QUEUED,))
+    position = next((i + 1 for i, j in enumerate(queued) if j.id == job.id), len(queued))
+    running = sorted(remaining(j, typical) for j in queue.store.with_state((RUNNING,)))
+    workers = max(int(getattr(queue, "workers", 1) or 1), 1)
+    # Jobs ahead are shared among the workers; the first free worker is the one whose job ends soonest.
+    first_free = running[0] if len(running) >= workers else 0.0
+    rounds = (position - 1) // workers
+    return {"queue_position": position, "eta_seconds": round(first_free + (rounds + 1) * typical, 1)}
