@@ -29,6 +29,7 @@ def _row(name: str, out) -> str:
 def _burst() -> str:
     """A burst of submissions against rate limit 10/min and queue cap 15: how many were refused, and how."""
     import requests
+
     from web.conftest import glb_bytes
     from web.faults import TINY, Serve
 

@@ -15,7 +15,10 @@ from werkzeug.exceptions import HTTPException
 
 from converter.bundled import asset_dir, sample_path
 from webapp import limits, security
+from webapp.api import api
+from webapp.jobs import make_queue
 from webapp.lease import InstanceLock
+from webapp.pages import pages
 
 ROOT = Path(__file__).resolve().parents[1]
 csrf = CSRFProtect()
@@ -72,8 +75,6 @@ def create_app(config: dict | None = None) -> Flask:
     if not app.config.get("SECRET_KEY"):
         app.config["SECRET_KEY"] = os.environ.get("FACESVG_SECRET_KEY") or _instance_secret(instance)
 
-    from webapp.jobs import make_queue
-
     try:
         queue = make_queue(app.config)
     except BaseException:
@@ -86,8 +87,6 @@ def create_app(config: dict | None = None) -> Flask:
     app.extensions["facesvg_cleanup"].maybe_run(force=True)  # then at most once per interval, on submissions
 
     csrf.init_app(app)
-    from webapp.api import api
-    from webapp.pages import pages
 
     csrf.exempt(api)  # the JSON API takes no cookies-based session; CSRF applies to the HTML forms
     app.register_blueprint(pages)

@@ -7,6 +7,12 @@ import os
 import signal
 import sys
 
+from converter import render
+from converter.errors import InputError
+from webapp import create_app, runner  # noqa: F401 - runner: imported so forked RQ work horses start warm
+from webapp.lease import InstanceBusy
+from webapp.warmup import warm_converter
+
 FORM_SLACK = 1 << 20  # room for the option fields and multipart framing beside the largest upload
 
 
@@ -29,10 +35,7 @@ def register_cli(subparsers) -> None:
 
 def cmd_serve(args: argparse.Namespace) -> int:
     """Start the web UI with waitress (a production WSGI server) on host:port."""
-    import waitress
-
-    from webapp import create_app
-    from webapp.lease import InstanceBusy
+    import waitress  # noqa: PLC0415 - the server is needed only by `serve`, not by every facesvg command
 
     config = {}
     if args.workers is not None:
@@ -68,20 +71,13 @@ def _exit(signum, frame) -> None:
 
 def cmd_worker(args: argparse.Namespace) -> int:
     """Work the facesvg RQ queue until stopped (or until empty with --burst)."""
-    from converter.errors import InputError
-
     if not args.queue or not args.queue.startswith(("redis://", "rediss://", "unix://")):
         raise InputError("give the Redis URL with --queue redis://host:port/0 (or set FACESVG_QUEUE).")
-    from redis import Redis
-    from rq import Queue, Worker
+    from redis import Redis  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
+    from rq import Queue, Worker  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
 
-    # Import the pipeline once here so each job's forked work horse starts warm (no GL context exists yet).
-    import webapp.runner  # noqa: F401
-    from converter import convert, extract, render  # noqa: F401
-
+    # The pipeline (imported at the top) and pyrender load here, so each forked work horse starts warm.
     render._pyrender()
-    from webapp.warmup import warm_converter
-
     warm_converter()  # JIT kernels compiled here are inherited by every work horse (no GL context is made)
     conn = Redis.from_url(args.queue)
     Worker([Queue("facesvg", connection=conn)], connection=conn).work(burst=args.burst)

@@ -163,8 +163,8 @@ class RQQueue(JobQueue):
 
     def __init__(self, url: str, storage: Storage, queue_name: str = "facesvg", job_timeout: int = 3600,
                  preview_frames: int = 48, lease_seconds: float = LEASE_SECONDS, retries: int = RETRIES) -> None:
-        from redis import Redis
-        from rq import Queue
+        from redis import Redis  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
+        from rq import Queue  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
 
         super().__init__(RedisStore(url, prefix=queue_name), storage, preview_frames)
         self.url = url
@@ -184,7 +184,7 @@ class RQQueue(JobQueue):
                            failure_ttl=86400)
 
     def _dequeue(self, job_id: str) -> None:
-        from rq.job import Job as RQJob
+        from rq.job import Job as RQJob  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
 
         try:
             RQJob.fetch(job_id, connection=self.connection).cancel()
@@ -216,8 +216,8 @@ class RQQueue(JobQueue):
         """The record; a never-started job RQ could not run (its worker failed it) is recorded as failed."""
         job = self.store.get(job_id)
         if job is not None and job.state == QUEUED and not job.attempts:
-            from rq.exceptions import NoSuchJobError
-            from rq.job import Job as RQJob
+            from rq.exceptions import NoSuchJobError  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
+            from rq.job import Job as RQJob  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
 
             try:
                 status = RQJob.fetch(job_id, connection=self.connection).get_status(refresh=True)

@@ -229,7 +229,7 @@ class RedisStore(JobStore):
     """The job table in Redis: a hash per job (JSON-encoded fields) and a sorted set ordered by creation."""
 
     def __init__(self, url: str, prefix: str = "facesvg") -> None:
-        import redis
+        import redis  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
 
         self.url = url
         self.prefix = prefix

@@ -11,15 +11,15 @@ import logging
 
 import numpy as np
 
+from converter.animation import FaceAnimation, Part
+from converter.convert import convert_animation
+from converter.options import ConversionOptions
+
 log = logging.getLogger("facesvg.webapp")
 
 
 def warm_converter() -> None:
     """Convert a 4-frame tetrahedron to SVG in memory (occlusion off: no GL context is created)."""
-    from converter.animation import FaceAnimation, Part
-    from converter.convert import convert_animation
-    from converter.options import ConversionOptions
-
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float32)
     faces = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int32)
     frames = np.stack([v + np.float32(0.1 * k) * (v[:, 1:2] > 0) for k in range(4)])

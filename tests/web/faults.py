@@ -139,7 +139,9 @@ class Outcome:
 
     @property
     def clean(self) -> bool:
-        return not (self.lost or self.duplicated or self.deleted or self.invalid) and self.done + self.failed == self.jobs
+        return (
+            not (self.lost or self.duplicated or self.deleted or self.invalid) and self.done + self.failed == self.jobs
+        )
 
 
 def settle_all(url_of, ids: list[str], timeout: float) -> dict:
