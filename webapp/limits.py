@@ -74,12 +74,43 @@ def check_submission():
         return refuse(429, f"too many submissions from you; wait {int(math.ceil(wait))} s and try again.", wait)
     cap = int(current_app.config.get("FACESVG_QUEUE_CAP") or 0)
     if cap:
-        queue = current_app.extensions["facesvg_queue"]
-        active = queue.store.count_active()
-        if active >= cap:
+        admissions: Admissions = current_app.extensions["facesvg_admissions"]
+        active = current_app.extensions["facesvg_queue"].store.count_active()
+        if not admissions.enter(active, cap):
             return refuse(503, f"the server has {active} jobs waiting or running, its limit; try again in a "
                                "minute.", 30)
+        g.facesvg_admitted = True
     return None
+
+
+class Admissions:
+    """Submissions admitted under the queue cap whose job is not stored yet, so a burst cannot overshoot it.
+
+    A request counts here from its admission until it ends; by then its job (if any) is in the store's active
+    count. In between it is counted twice, which can only refuse a little early, never admit past the cap.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._pending = 0
+
+    def enter(self, active: int, cap: int) -> bool:
+        """Admit one more submission when active + those in flight stay under cap."""
+        with self._lock:
+            if active + self._pending >= cap:
+                return False
+            self._pending += 1
+            return True
+
+    def leave(self) -> None:
+        """The admitted request ended."""
+        with self._lock:
+            self._pending = max(self._pending - 1, 0)
+
+
+def _leave_admission(exc: BaseException | None = None) -> None:
+    if g.pop("facesvg_admitted", False):
+        current_app.extensions["facesvg_admissions"].leave()
 
 
 def check_options(options: dict) -> None:
@@ -102,4 +133,6 @@ def check_options(options: dict) -> None:
 def install(app) -> None:
     """Create the limiter from FACESVG_RATE_LIMIT (submissions per minute per client) and hook the checks."""
     app.extensions["facesvg_limiter"] = RateLimiter(int(app.config.get("FACESVG_RATE_LIMIT") or 0))
+    app.extensions["facesvg_admissions"] = Admissions()
     app.before_request(check_submission)
+    app.teardown_request(_leave_admission)

@@ -257,3 +257,26 @@ def test_a_chunked_upload_is_stopped_once_it_passes_the_limit(tmp_path):
         assert limit <= sent < limit + (8 << 20), sent  # stopped soon after the limit, far from the 64 MiB
     finally:
         server.stop()
+
+
+def test_queue_cap_admissions_never_overshoot_under_a_concurrent_burst():
+    import threading
+
+    from webapp.limits import Admissions
+
+    admissions, admitted, start = Admissions(), [], threading.Barrier(24)
+
+    def submit():
+        start.wait()
+        if admissions.enter(active=3, cap=10):
+            admitted.append(1)
+
+    threads = [threading.Thread(target=submit) for _ in range(24)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(admitted) == 7  # 3 active + 7 in flight = the cap of 10, whatever the interleaving
+    for _ in admitted:
+        admissions.leave()
+    assert admissions.enter(active=9, cap=10) and not admissions.enter(active=9, cap=10)
