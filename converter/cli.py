@@ -13,7 +13,7 @@ from converter import formats
 from converter.bundled import sample_path
 from converter.convert import convert
 from converter.errors import FacesvgError, InputError
-from converter.options import ConversionOptions, OptionField, option_fields
+from converter.options import ConversionOptions, OptionField, option_fields, seconds_left
 from converter.outputs import choices, output_kind
 from converter.userfiles import check_output, write_atomic
 
@@ -24,16 +24,20 @@ class ProgressBar:
     def __init__(self, enabled: bool) -> None:
         self.enabled = enabled
         self.last = -1.0
+        self.start: float | None = None
 
     def __call__(self, stage: str, fraction: float) -> None:
         if not self.enabled:
             return
         now = time.monotonic()
+        self.start = now if self.start is None else self.start
         if fraction < 1.0 and now - self.last < 0.1:
             return
         self.last = now
         filled = int(round(fraction * 30))
-        sys.stderr.write(f"\r[{'#' * filled}{' ' * (30 - filled)}] {fraction * 100:5.1f}% {stage:<12}")
+        left = seconds_left(now - self.start, fraction) if fraction < 1.0 else None
+        eta = f"ETA {int(left) // 60}:{int(left) % 60:02d}" if left is not None and now - self.start > 1.0 else ""
+        sys.stderr.write(f"\r[{'#' * filled}{' ' * (30 - filled)}] {fraction * 100:5.1f}% {stage:<12} {eta:<10}")
         if fraction >= 1.0:
             sys.stderr.write("\n")
         sys.stderr.flush()

@@ -28,6 +28,13 @@ def no_progress(stage: str, fraction: float) -> None:
     """A progress callback that ignores everything."""
 
 
+def seconds_left(elapsed: float, fraction: float, min_fraction: float = 0.05) -> float | None:
+    """Seconds a job still needs, extrapolating its progress so far; None until it has done min_fraction."""
+    if fraction < min_fraction:
+        return None
+    return max(elapsed / fraction * (1.0 - fraction), 0.0)
+
+
 @dataclass(frozen=True)
 class Option:
     """What the CLI, the web form, the API and OpenAPI show and check for one ConversionOptions field."""

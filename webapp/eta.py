@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 
+from converter.options import seconds_left
 from webapp.jobstore import DONE, QUEUED, RUNNING, Job
 
 DEFAULT_SECONDS = 20.0  # a job's duration before any has finished on this server
@@ -19,9 +20,8 @@ def remaining(job: Job, typical: float, now: float | None = None) -> float:
     """Seconds a running job still needs, from the progress the converter reported (or the typical duration)."""
     now = time.time() if now is None else now
     elapsed = max(now - (job.started or now), 0.0)
-    if job.progress >= 0.05:
-        return max(elapsed / job.progress * (1.0 - job.progress), 0.0)
-    return max(typical - elapsed, 1.0)
+    left = seconds_left(elapsed, job.progress)
+    return left if left is not None else max(typical - elapsed, 1.0)
 
 
 def standing(queue, job: Job) -> dict:

@@ -136,3 +136,19 @@ def test_convert_clones_onto_another_face(sample_path, small_data, tmp_path):
     assert ev.triangles.max() < 898  # the target's triangles, not the sample's 2,998
     moved = np.abs(ev.xy - ev.xy[:1]).max(axis=(2, 3))  # (T, P) px each path's vertices moved from frame 0
     assert moved.max() > 2.0  # the clone moves with the source's expressions and head motion
+
+
+def test_progress_bar_shows_an_eta_from_the_progress_so_far(monkeypatch, capsys):
+    from converter import cli
+    from converter.options import seconds_left
+
+    clock = iter([100.0, 104.0, 112.0])
+    monkeypatch.setattr(cli.time, "monotonic", lambda: next(clock))
+    bar = cli.ProgressBar(enabled=True)
+    bar("load", 0.0)
+    bar("extract", 0.25)  # 4 s for a quarter: 12 s left
+    bar("write", 0.5)  # 12 s for a half: 12 s left
+    err = capsys.readouterr().err
+    assert "ETA 0:12" in err.split("\r")[2] and "ETA 0:12" in err.split("\r")[3]
+    assert "ETA" not in err.split("\r")[1]
+    assert seconds_left(10.0, 0.01) is None and seconds_left(30.0, 0.5) == 30.0
