@@ -9,7 +9,7 @@ import sys
 import time
 from pathlib import Path
 
-from converter import formats
+from converter import formats, framing
 from converter.bundled import sample_path
 from converter.convert import convert
 from converter.errors import FacesvgError, InputError
@@ -106,6 +106,7 @@ def cmd_info(args: argparse.Namespace) -> int:
         "triangles": anim.n_faces,
         "parts": {p.name: int((anim.part_ids == i).sum()) for i, p in enumerate(anim.parts)},
         **{k: v for k, v in anim.extras.items() if isinstance(v, (int, float, str, list, dict))},
+        "frame_on": framing.candidates(anim),  # what --frame-on accepts
     }
     if args.json:
         print(json.dumps(info, indent=2, sort_keys=True))

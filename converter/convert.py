@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from converter import cloning, formats, mpeg4, simplify, smoothing
+from converter import cloning, formats, framing, mpeg4, simplify, smoothing
 from converter import extract as extraction
 from converter.animation import FaceAnimation
 from converter.blendshapes import drive_file
@@ -43,6 +43,7 @@ def prepare(
     anim: FaceAnimation, options: ConversionOptions, report: Report, progress: Progress = no_progress
 ) -> FaceAnimation:
     """The optional 3D stages in order: FAP driving, frame range, cloning, triangle budget."""
+    anim = framing.decide(anim, options.frame_on)  # before the stages, which may drop the vertices it looks at
     if "weights" in anim.extras:  # what the weight capture matched, from load()
         report.counts.update(anim.extras["weights"]["counts"])
         report.warnings.extend(anim.extras["weights"]["warnings"])
@@ -76,7 +77,9 @@ def extract_sheet(anim: FaceAnimation, options: ConversionOptions, report: Repor
     if options.frame is not None and not 0 <= options.frame < anim.n_frames:
         raise InputError(f"--frame {options.frame} is outside 0..{anim.n_frames - 1}; choose a frame inside it.")
     t = time.perf_counter()
-    camera = extraction.fit_camera(anim, options.size, options.yaw, options.pitch, options.fov, options.ortho)
+    camera = extraction.fit_camera(anim, options.size, options.yaw, options.pitch, options.fov, options.ortho,
+                                   options.frame_on)
+    report.warnings.extend(framing.resolve(anim, options.frame_on).notes)  # what was framed, and why
     sheet = extraction.extract(
         anim, camera, neutral=options.neutral_frame, occlusion=options.occlusion, progress=progress,
         occlusion_frames=None if options.frame is None else (options.frame,),  # a still: only its frame counts

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from converter import idpass, render
+from converter import framing, idpass, render
 from converter.animation import FaceAnimation, face_normals, vertex_normals
 from converter.camera import Camera
 from converter.errors import InputError
@@ -16,9 +16,11 @@ FRAME_BLOCK = 32  # frames per block of the per-frame work (every result is per 
 
 
 def fit_camera(anim: FaceAnimation, size: int = 512, yaw: float = 0.0, pitch: float = 0.0,
-               fov: float = 30.0, ortho: bool = False) -> Camera:
-    """The camera that frames the whole animation (every frame) from the chosen angle."""
-    return Camera.fit(anim.frames, size=size, yaw=yaw, pitch=pitch, fov=fov, ortho=ortho)
+               fov: float = 30.0, ortho: bool = False, frame_on: str | None = None) -> Camera:
+    """The camera that frames the animation (every frame) from the chosen angle: see framing.resolve for what."""
+    framed = framing.resolve(anim, frame_on)
+    frames = anim.frames if framed.vertices is None else anim.frames[:, framed.vertices]
+    return Camera.fit(frames, size=size, yaw=yaw + framed.yaw, pitch=pitch, fov=fov, ortho=ortho)
 
 
 def cull(xy: np.ndarray, ndc_z: np.ndarray, w: np.ndarray, faces: np.ndarray, width: int, height: int) -> np.ndarray:

@@ -103,6 +103,9 @@ class ConversionOptions:
                         minimum=-180, maximum=180, unit="degrees")
     pitch: float = option(0.0, "camera degrees up or down", label="Camera pitch (°)", minimum=-89, maximum=89,
                           unit="degrees")
+    frame_on: str | None = option(None, "frame only this part or glTF node/mesh (see `facesvg info`)",
+                                  label="Frame on part or node",
+                                  unset="everything, or the head of a full-body avatar", advanced=True)
     fov: float = option(30.0, "vertical field of view in degrees (perspective)", label="Field of view (°)",
                         minimum=1, maximum=150, unit="degrees", advanced=True)
     ortho: bool = option(False, "orthographic projection", label="Orthographic camera", advanced=True)

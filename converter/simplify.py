@@ -117,9 +117,12 @@ def _allocate(fn, positions: np.ndarray, attrs: np.ndarray, lock: np.ndarray, fa
 
 def front_facing_any(anim: FaceAnimation, options: ConversionOptions) -> np.ndarray:
     """Bool (F,): triangles front-facing and in view in at least one frame for the options' camera."""
-    cam = fit_camera(anim, options.size, options.yaw, options.pitch, options.fov, options.ortho)
+    cam = fit_camera(anim, options.size, options.yaw, options.pitch, options.fov, options.ortho, options.frame_on)
     xy, z, w = cam.project(anim.frames)
     return cull(xy, z, w, anim.faces, cam.width, cam.height).any(axis=0)
+
+
+PER_VERTEX_EXTRAS = ("node_of_vertex", "joint_of_vertex", "framed_vertices")  # what framing reads, per vertex
 
 
 def simplify(anim: FaceAnimation, max_triangles: int, report: Report,
@@ -160,7 +163,8 @@ def simplify(anim: FaceAnimation, max_triangles: int, report: Report,
         anim.frames[:, used], faces=inverse.reshape(-1, 3).astype(np.int32), part_ids=out_parts,
         vertex_colors=None if anim.vertex_colors is None else anim.vertex_colors[used],
         uvs=None if anim.uvs is None else anim.uvs[used],
-        extras={**anim.extras, "simplified_from": [anim.n_vertices, anim.n_faces]},
+        extras={**anim.extras, "simplified_from": [anim.n_vertices, anim.n_faces],
+                **{k: anim.extras[k][used] for k in PER_VERTEX_EXTRAS if k in anim.extras}},
     )
     report.counts["budget_triangles"] = simplified.n_faces
     report.counts["budget_vertices"] = simplified.n_vertices
@@ -184,7 +188,8 @@ def budget_deviation_px(original: FaceAnimation, simplified: FaceAnimation, face
     from scipy.spatial import cKDTree  # noqa: PLC0415 - heavy; loaded on first use to keep start-up fast
     from trimesh.triangles import closest_point, points_to_barycentric  # noqa: PLC0415 - heavy; loaded on first use to keep start-up fast
 
-    cam = fit_camera(simplified, options.size, options.yaw, options.pitch, options.fov, options.ortho)
+    cam = fit_camera(simplified, options.size, options.yaw, options.pitch, options.fov, options.ortho,
+                     options.frame_on)
     xy0, z0, w0 = cam.project(original.frames)
     visible = cull(xy0, z0, w0, faces, cam.width, cam.height)  # (T, F) original triangles shown
     sf, sp = simplified.faces, simplified.part_ids

@@ -46,6 +46,6 @@ def apply(anim: FaceAnimation, options, report) -> FaceAnimation:
     if not options.smooth:
         return anim
     out = smooth(anim, options.smooth)
-    camera = fit_camera(out, options.size, options.yaw, options.pitch, options.fov, options.ortho)
+    camera = fit_camera(out, options.size, options.yaw, options.pitch, options.fov, options.ortho, options.frame_on)
     report.figures["smooth_max_px"], report.figures["smooth_mean_px"] = deviation_px(anim.frames, out.frames, camera)
     return out

@@ -228,7 +228,7 @@ def write_previews(anim, options, out, limit: int, progress, only: int | None = 
     if not frames:
         return []
     camera = fit_camera(anim, min(options.size, PREVIEW_MAX_SIZE), options.yaw, options.pitch, options.fov,
-                        options.ortho)
+                        options.ortho, options.frame_on)
     sheet = extract(anim, camera, neutral=0, occlusion=False, reference_frames=tuple(frames))
     for i, k in enumerate(frames):
         buf = io.BytesIO()

@@ -129,6 +129,7 @@ class _Document(Accessors):
                          for *_, prims in instances for p in prims)
         flat = [j for take in chosen for j in take]
         extras = {
+            **self.node_index(order, instances),
             "morph_targets": morph_names if morph_names else morph_count,
             "animated_nodes": sorted({self.node_label(n) for tracks in played for (n, path) in tracks
                                       if path != "weights"}),
@@ -152,6 +153,33 @@ class _Document(Accessors):
             vertex_colors=np.concatenate(colors) if has_colors else None,
             extras=extras,
         )
+
+    def node_index(self, order: list[tuple[int, int]], instances: list) -> dict:
+        """What framing reads: the scene's node tree and the node each vertex comes from, plus the VRM version."""
+        position = {node: i for i, (node, _) in enumerate(order)}
+        tree = []
+        for node, parent in order:
+            mesh_index = self.item("nodes", node).get("mesh")
+            mesh = self.item("meshes", mesh_index) if mesh_index is not None else {}
+            targets = tuple(str(n) for n in (mesh.get("extras") or {}).get("targetNames") or ())
+            tree.append((self.node_label(node), position.get(parent, -1), str(mesh.get("name") or ""), targets))
+        counts = [sum(len(p["positions"]) for p in prims) for *_, prims in instances]
+        of_vertex = np.repeat(np.array([position[i] for i, *_ in instances], np.int32), counts)
+        joint_of_vertex = []  # the scene node of each vertex's strongest joint, -1 when unskinned or outside
+        for _, node, _, prims in instances:
+            joint_nodes = self.skin(node["skin"])[0] if node.get("skin") is not None else []
+            where = np.array([position.get(j, -1) for j in joint_nodes] + [-1], np.int32)
+            for p in prims:
+                if not joint_nodes:
+                    joint_of_vertex.append(np.full(len(p["positions"]), -1, np.int32))
+                    continue
+                strongest = p["joints"][np.arange(len(p["joints"])), np.argmax(p["weights"], axis=1)]
+                joint_of_vertex.append(where[np.clip(strongest, 0, len(joint_nodes))])
+        extensions = self.doc.get("extensions") or {}
+        vrm = "0.x" if "VRM" in extensions else "1.0" if "VRMC_vrm" in extensions else None
+        # tuples and arrays: `info` prints only plain lists and dicts
+        return {"node_tree": tuple(tree), "node_of_vertex": of_vertex, "joint_of_vertex": np.concatenate(
+            joint_of_vertex), **({"vrm": vrm} if vrm else {})}
 
     def pose(self, order: list[tuple[int, int]], instances: list, n_vertices: int, tracks: Tracks,
              t: np.ndarray) -> np.ndarray:
