@@ -79,8 +79,7 @@ class NotFound(Exception):
 
 
 def detect(verts: np.ndarray, faces: np.ndarray, name: str = "face") -> dict[str, np.ndarray]:
-    """Named 3D feature points on a neutral face (only the ones the rules find); InputError naming the face
-    and the missing feature when the nose or chin cannot be found."""
+    """Named 3D feature points on a neutral face; InputError naming the face and what is missing on failure."""
     verts = np.asarray(verts, np.float64)
     faces = np.asarray(faces)
     try:
