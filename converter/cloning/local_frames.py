@@ -58,9 +58,10 @@ def ratio(w_src: np.ndarray, w_tgt: np.ndarray) -> np.ndarray:
     return np.clip(r, whole / 3, whole * 3)  # a w-point far off in one axis must not blow the motion up
 
 
-def landmark_ids(verts: np.ndarray, faces: np.ndarray, correspondences: str | None) -> dict[str, int]:
+def landmark_ids(verts: np.ndarray, faces: np.ndarray, correspondences: str | None,
+                 name: str = "source") -> dict[str, int]:
     """Landmark name -> vertex id on the source base (automatic; a JSON {"landmarks": {name: id}} overrides)."""
-    pts = landmarks.detect(verts, faces)
+    pts = landmarks.detect(verts, faces, name)
     up, lo = landmarks.lip_contact(verts, faces, pts)
     if len(up):
         pts["lip_corner_0"], pts["lip_corner_1"] = verts[up[0]], verts[up[-1]]
@@ -122,7 +123,7 @@ def clone(source: FaceAnimation, target: FaceAnimation, correspondences: str | N
     t_base = target.frames[0].astype(np.float64)
     faces = dense.skin_faces(source)
     size = np.ptp(s_base[np.unique(faces)], axis=0).max()
-    ids = landmark_ids(s_base, faces, correspondences)
+    ids = landmark_ids(s_base, faces, correspondences, source.name)
     label = regions(s_base, ids, size)
     m = matrices(s_base, t_base, ids)
     disp = source.frames - source.frames[0]
