@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from converter.cli import main
+from converter.cloning.dense import skin_faces
 from converter.convert import convert_animation
 from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder
 from converter.formats.gltf import load_gltf
@@ -103,3 +104,14 @@ def test_info_lists_parts_with_labels_and_colours(tmp_path, as_json):
         assert info["part_labels"][1]["label"] == "Wolf3D_Head/Wolf3D_Eye"
     else:
         assert f"part: Wolf3D_Head/mat_skin (skin) {skin}, 1 triangles" in out.getvalue()
+
+
+def test_every_skin_primitive_counts_as_skin_for_cloning():
+    b = GltfBuilder()
+    for k, name in enumerate(("Wolf3D_Skin", "Wolf3D_Body", "Wolf3D_Eye")):
+        triangle_scene(b, positions=TRI + k, material={"name": name, "pbrMetallicRoughness": {
+            "baseColorFactor": [0.5 + k / 10, 0.4, 0.3, 1]}})
+    b.doc["scenes"] = [{"nodes": [0, 1, 2]}]
+    a = load_gltf(b.glb(), HERE, None, "avatar")
+    assert [p.name for p in a.parts] == ["skin", "skin", "eye"]
+    assert sorted(skin_faces(a).ravel().tolist()) == list(range(6))  # both skin triangles, not the eye
