@@ -243,7 +243,7 @@ def test_gltf_targets_match_normalised_names(sample_path):
 
 def test_gltf_deltas_in_world_space_on_every_mesh_rest_at_zero_weights():
     """Two meshes share `jawOpen`; one node scales by 2 and has default weights and a clip, one turns 90 degrees."""
-    from converter.formats.gltf_build import ARRAY_BUFFER, GltfBuilder
+    from converter.export.gltf_builder import ARRAY_BUFFER, GltfBuilder
 
     tri = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
     b = GltfBuilder()
