@@ -1,4 +1,10 @@
-"""FaceAnimation: the one 3D type every loader produces and every 3D stage maps to a new one."""
+"""FaceAnimation: the one 3D type every loader produces and every 3D stage maps to a new one.
+
+Colour convention: Part.color and vertex_colors are display (sRGB-encoded) values 0..1, as OBJ/MTL Kd, PLY
+colours and DEFAULT_PART_COLORS are in practice; a vertex colour multiplies its part's colour as display values.
+Loaders of linear-light formats convert at load time (glTF: baseColorFactor and COLOR_0 are linear, base-colour
+textures sRGB; formats/gltf/scene.py). Lighting decodes to linear, lights and encodes once (converter/lighting.py).
+"""
 
 from __future__ import annotations
 
@@ -20,10 +26,18 @@ DEFAULT_PART_COLORS: dict[str, tuple[float, float, float]] = {
 
 @dataclass(frozen=True)
 class Part:
-    """A named group of triangles (skin, eye, teeth, ...) with its base colour in linear-ish RGB 0..1."""
+    """A group of triangles: semantic name (skin, eye, iris, teeth, mouth, lashes), display base colour, label.
+
+    name is what stages select by (cloning, MPEG-4, rigid groups); label is the source's own name for the group
+    (e.g. "Wolf3D_Head/Wolf3D_Skin", node/material), shown by `facesvg info`; it defaults to name."""
 
     name: str
     color: tuple[float, float, float]
+    label: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.label:
+            object.__setattr__(self, "label", self.name)
 
 
 @dataclass(frozen=True, eq=False)

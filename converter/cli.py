@@ -94,9 +94,17 @@ def cmd_convert(args: argparse.Namespace) -> int:
     return 0
 
 
+def hex_color(rgb: tuple[float, float, float]) -> str:
+    """#rrggbb of a display colour 0..1."""
+    return "#" + "".join(f"{int(round(min(max(float(c), 0.0), 1.0) * 255)):02x}" for c in rgb)
+
+
 def cmd_info(args: argparse.Namespace) -> int:
     """facesvg info INPUT."""
     anim = formats.load(args.input, cache=args.cache, animation=args.animation)
+    counts: dict[str, int] = {}  # triangles per semantic part, over every part of that name
+    for i, p in enumerate(anim.parts):
+        counts[p.name] = counts.get(p.name, 0) + int((anim.part_ids == i).sum())
     info = {
         "name": anim.name,
         "frames": anim.n_frames,
@@ -104,7 +112,9 @@ def cmd_info(args: argparse.Namespace) -> int:
         "duration": round(anim.duration, 4),
         "vertices": anim.n_vertices,
         "triangles": anim.n_faces,
-        "parts": {p.name: int((anim.part_ids == i).sum()) for i, p in enumerate(anim.parts)},
+        "parts": counts,
+        "part_labels": [{"label": p.label, "part": p.name, "color": hex_color(p.color),
+                         "triangles": int((anim.part_ids == i).sum())} for i, p in enumerate(anim.parts)],
         **{k: v for k, v in anim.extras.items() if isinstance(v, (int, float, str, list, dict))},
         "frame_on": framing.candidates(anim),  # what --frame-on accepts
     }
@@ -116,6 +126,11 @@ def cmd_info(args: argparse.Namespace) -> int:
                 for clip in v:
                     print(f"{'animation':>16}: {clip['index']} {clip['name'] or '(unnamed)'}: {clip['duration']} s, "
                           f"{clip['channels']} channels, targets {', '.join(clip['targets']) or 'none'}")
+                continue
+            if k == "part_labels":  # one line per part: label, semantic part, display colour, triangles
+                for part in v:
+                    print(f"{'part':>16}: {part['label']} ({part['part']}) {part['color']}, {part['triangles']} "
+                          "triangles")
                 continue
             print(f"{k:>16}: {v}")
     return 0

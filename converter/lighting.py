@@ -1,4 +1,8 @@
-"""The one lighting model shared by the prerender, flat shading and Gouraud shading."""
+"""The one lighting model shared by the prerender, flat shading and Gouraud shading, and the sRGB transfer curve.
+
+Colours in a FaceAnimation are display (sRGB-encoded) values (see converter/animation.py); light adds up in
+linear light, so lambert decodes the base colour, lights it and encodes the result once, as a glTF viewer does.
+"""
 
 from __future__ import annotations
 
@@ -25,10 +29,26 @@ def light_direction_world(view: np.ndarray, lighting: Lighting = DEFAULT_LIGHTIN
     return view[:3, :3].T @ d
 
 
+def srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    """sRGB-encoded values 0..1 to linear light (IEC 61966-2-1 piecewise curve), float32."""
+    c = np.clip(np.asarray(c, np.float32), 0.0, 1.0)
+    f = np.float32
+    return np.where(c <= 0.04045, c / f(12.92), ((c + f(0.055)) / f(1.055)) ** f(2.4)).astype(np.float32)
+
+
+def linear_to_srgb(c: np.ndarray) -> np.ndarray:
+    """Linear light 0..1 to sRGB-encoded values (IEC 61966-2-1 piecewise curve), float32."""
+    c = np.clip(np.asarray(c, np.float32), 0.0, 1.0)
+    f = np.float32
+    out = np.where(c <= 0.0031308, c * f(12.92), f(1.055) * c ** f(1 / 2.4) - f(0.055))
+    return np.where(c >= 1.0, np.float32(1.0), out).astype(np.float32)  # float32 rounding must not dim white
+
+
 def lambert(
     normals: np.ndarray, base_rgb: np.ndarray, view: np.ndarray, lighting: Lighting = DEFAULT_LIGHTING
 ) -> np.ndarray:
-    """Display-space colour base * (ambient + diffuse * max(0, n.l)), clipped to 0..1; broadcasts."""
+    """Display colour of display base_rgb lit in linear light: srgb(linear(base) * (ambient + diffuse * n.l+))."""
     light = light_direction_world(view, lighting).astype(np.float32)
     ndl = np.clip(np.asarray(normals, np.float32) @ light, 0.0, None)
-    return np.clip(np.asarray(base_rgb, np.float32) * (lighting.ambient + lighting.diffuse * ndl)[..., None], 0.0, 1.0)
+    lit = srgb_to_linear(base_rgb) * (lighting.ambient + lighting.diffuse * ndl)[..., None]
+    return linear_to_srgb(lit)

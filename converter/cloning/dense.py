@@ -53,9 +53,9 @@ class DenseMap:
 
 def skin_faces(anim: FaceAnimation) -> np.ndarray:
     """Triangles of the skin part when there is one, else the deformable triangles."""
-    names = [p.name for p in anim.parts]
-    if "skin" in names:
-        f = anim.faces[anim.part_ids == names.index("skin")]
+    skin = [i for i, p in enumerate(anim.parts) if p.name == "skin"]  # a glTF file has a skin part per primitive
+    if skin:
+        f = anim.faces[np.isin(anim.part_ids, skin)]
         if len(f):
             return f
     return rigid.soft_faces(anim)

@@ -6,6 +6,7 @@ import numpy as np
 
 from converter.animation import FaceAnimation
 from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder
+from converter.lighting import srgb_to_linear
 
 
 def write_glb(anim: FaceAnimation) -> bytes:
@@ -22,14 +23,15 @@ def write_glb(anim: FaceAnimation) -> bytes:
                for d in deltas]
     attributes = {"POSITION": pos}
     if anim.vertex_colors is not None:
-        attributes["COLOR_0"] = b.accessor(np.ascontiguousarray(anim.vertex_colors, np.float32), target=ARRAY_BUFFER)
+        # glTF colours are linear; ours are display values (converter/animation.py).
+        attributes["COLOR_0"] = b.accessor(srgb_to_linear(anim.vertex_colors), target=ARRAY_BUFFER)
     primitives = []
     for pid, part in enumerate(anim.parts):
         tris = anim.faces[anim.part_ids == pid]
         if not len(tris):
             continue
         mat = b.add("materials", {"name": part.name, "pbrMetallicRoughness": {
-            "baseColorFactor": [float(c) for c in part.color] + [1.0], "metallicFactor": 0.0}})
+            "baseColorFactor": [float(c) for c in srgb_to_linear(part.color)] + [1.0], "metallicFactor": 0.0}})
         idx = b.accessor(np.ascontiguousarray(tris.reshape(-1), np.uint32), target=ELEMENT_ARRAY_BUFFER)
         prim = {"attributes": attributes, "indices": idx, "material": mat, "mode": 4}
         if targets:

@@ -9,6 +9,18 @@ from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, Gl
 TRI = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
 
 
+def srgb(linear) -> np.ndarray:
+    """The sRGB encoding of linear values, written from the spec (IEC 61966-2-1) for the tests' expectations."""
+    x = np.asarray(linear, np.float64)
+    return np.where(x > 0.0031308, 1.055 * np.abs(x) ** (1 / 2.4) - 0.055, 12.92 * x)
+
+
+def linear(encoded) -> np.ndarray:
+    """The inverse: sRGB-encoded values to linear light."""
+    x = np.asarray(encoded, np.float64)
+    return np.where(x > 0.04045, ((x + 0.055) / 1.055) ** 2.4, x / 12.92)
+
+
 def triangle_scene(b: GltfBuilder | None = None, positions: np.ndarray = TRI, material: dict | None = None,
                    node: dict | None = None, mesh_name: str = "face",
                    extra_prim: dict | None = None) -> tuple[GltfBuilder, int]:

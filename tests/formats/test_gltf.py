@@ -13,7 +13,7 @@ from converter.errors import InputError
 from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder, encode_filter
 from converter.formats import load
 from converter.formats.gltf import _Document, load_gltf, parse_container
-from tests.formats.helpers import TRI, add_track, triangle_scene
+from tests.formats.helpers import TRI, add_track, srgb, triangle_scene
 
 HERE = Path(".")
 
@@ -29,7 +29,9 @@ def test_static_triangle_gives_one_frame_at_default_fps():
     assert a.n_frames == 1 and a.fps == 30.0
     np.testing.assert_array_equal(a.frames[0], TRI)
     assert a.faces.tolist() == [[0, 1, 2]]
-    assert [(p.name, p.color) for p in a.parts] == [("skin", (0.5, 0.25, 1.0))]
+    # baseColorFactor is linear (glTF 2.0); parts hold display (sRGB) colours.
+    assert [(p.name, p.label) for p in a.parts] == [("skin", "node0/Skin")]
+    np.testing.assert_allclose(a.parts[0].color, srgb([0.5, 0.25, 1.0]), atol=1e-6)
     assert a.vertex_colors is None
 
 
@@ -127,7 +129,9 @@ def test_vertex_colours_float_and_normalized(colors, expected):
     c = b.accessor(colors, normalized=colors.dtype != np.float32, target=ARRAY_BUFFER)
     triangle_scene(b, extra_prim={"attributes": {"POSITION": b.accessor(TRI, target=ARRAY_BUFFER), "COLOR_0": c}})
     a = load_gltf(b.glb(), HERE, None, "colors")
-    np.testing.assert_allclose(a.vertex_colors, np.tile(expected, (3, 1)), atol=1e-6)
+    # COLOR_0 is linear; with no baseColorFactor the spec's white factor applies (not the part's default colour).
+    assert a.parts[0].color == (1.0, 1.0, 1.0)
+    np.testing.assert_allclose(a.vertex_colors, np.tile(srgb(expected), (3, 1)), atol=1e-6)
 
 
 def test_parts_from_material_mesh_and_node_names():
@@ -140,7 +144,9 @@ def test_parts_from_material_mesh_and_node_names():
     b.doc["scenes"] = [{"nodes": list(range(len(names)))}]
     a = load_gltf(b.glb(), HERE, None, "parts")
     assert [a.parts[i].name for i in a.part_ids] == [n for _, _, n in names]
-    assert a.parts[a.part_ids[1]].color == (0.1, 0.0, 0.0)
+    np.testing.assert_allclose(a.parts[a.part_ids[1]].color, srgb([0.1, 0.0, 0.0]), atol=1e-6)
+    assert len(a.parts) == len(names)  # one part per primitive, labelled node/material (or mesh)
+    assert a.parts[a.part_ids[1]].label == "node1/Iris_L" and a.parts[a.part_ids[5]].label == "node5/Head"
 
 
 def test_external_buffer_and_refusal_of_paths_outside(tmp_path):
@@ -305,7 +311,7 @@ def test_real_gltfpack_output_matches_its_float_input(packed):
     assert (a.n_frames, a.fps, a.n_faces, a.n_vertices) == (ref.n_frames, ref.fps, ref.n_faces, ref.n_vertices) == (
         25, 24.0, 242, 144)
     assert a.extras["morph_targets"] == ["smile", "jaw"] and a.extras["animated_nodes"] == ["face", "head"]
-    assert [p.name for p in a.parts] == ["skin"] and np.allclose(a.parts[0].color, (0.8, 0.6, 0.5))
+    assert [p.name for p in a.parts] == ["skin"] and np.allclose(a.parts[0].color, srgb([0.8, 0.6, 0.5]))
     # gltfpack may reorder vertices: match each frame's points by nearest neighbour.
     for k in range(0, 25, 4):
         dist, _ = cKDTree(ref.frames[k]).query(a.frames[k])

@@ -11,7 +11,7 @@ from PIL import Image
 from converter.export.gltf_builder import ARRAY_BUFFER
 from converter.formats import load
 from converter.formats.gltf import load_gltf
-from tests.formats.helpers import triangle_scene
+from tests.formats.helpers import linear, srgb, triangle_scene
 
 HERE = Path(".")
 # A 2 x 2 texture: red, green / blue, white. UV (0, 0) is the image's top-left corner.
@@ -56,13 +56,27 @@ def test_texture_between_texel_centres_is_bilinear_and_times_the_factor():
     uv = np.float32([[0.5, 0.25], [0.25, 0.5], [0.5, 0.5]])  # red|green, red/blue, the middle of all four
     b.doc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"] = b.accessor(uv, target=ARRAY_BUFFER)
     anim = load_gltf(b.glb(), HERE, None, "tex")
-    want = np.array([[0.5, 0.5, 0], [0.5, 0, 0.5], [0.5, 0.5, 0.5]]) * [0.5, 1, 1]
+    # Texels are sRGB: decoded to linear, filtered, times the linear factor, then encoded for display (glTF 2.0).
+    want = srgb(np.array([[0.5, 0.5, 0], [0.5, 0, 0.5], [0.5, 0.5, 0.5]]) * [0.5, 1, 1])
     np.testing.assert_allclose(anim.face_base_colors(), want, atol=1e-6)
+    np.testing.assert_allclose(anim.parts[0].color, srgb([0.5, 1, 1]), atol=1e-6)
+
+
+def test_texture_of_a_known_srgb_colour_round_trips_times_the_factor():
+    b = textured_triangle()
+    b.doc["images"][0] = {"bufferView": b.view(png(np.full((2, 2, 3), [200, 100, 50], np.uint8))),
+                          "mimeType": "image/png"}
+    np.testing.assert_allclose(load_gltf(b.glb(), HERE, None, "tex").face_base_colors(),
+                               np.tile([200 / 255, 100 / 255, 50 / 255], (3, 1)), atol=1e-5)
+    b.doc["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = [0.5, 0.5, 0.5, 1]
+    want = srgb(0.5 * linear(np.array([200, 100, 50]) / 255))
+    np.testing.assert_allclose(load_gltf(b.glb(), HERE, None, "tex").face_base_colors(), np.tile(want, (3, 1)),
+                               atol=1e-5)
 
 
 def test_vertex_colours_win_over_the_texture():
     anim = load_gltf(textured_triangle(colors=[[0.2, 0.2, 0.2]] * 3).glb(), HERE, None, "tex")
-    np.testing.assert_allclose(anim.face_base_colors(), 0.2, atol=1e-6)
+    np.testing.assert_allclose(anim.face_base_colors(), srgb(0.2), atol=1e-6)  # COLOR_0 is linear
 
 
 def test_ktx2_texture_falls_back_to_the_factor_with_a_note():
@@ -72,7 +86,8 @@ def test_ktx2_texture_falls_back_to_the_factor_with_a_note():
         return {"KHR_texture_basisu": {"source": ktx}}
 
     anim = load_gltf(textured_triangle(factor=[0.2, 0.4, 0.6, 1], texture_extensions=basisu).glb(), HERE, None, "ktx")
-    assert [p.color for p in anim.parts] == [(0.2, 0.4, 0.6)] and anim.vertex_colors is None
+    np.testing.assert_allclose(anim.parts[0].color, srgb([0.2, 0.4, 0.6]), atol=1e-6)
+    assert anim.vertex_colors is None
     (note,) = anim.extras["warnings"]
     assert "image/ktx2" in note and "cannot be decoded" in note and "base colour" in note
 

@@ -29,7 +29,10 @@ def test_sample_counts_parts_and_facts(sample, sample_path):
     assert sample_path.stat().st_size <= 400_000
     assert (sample.n_frames, sample.fps) == (121, 30.0)
     assert 2800 <= sample.n_faces <= 3200
-    assert [p.name for p in sample.parts] == ["skin", "mouth", "teeth", "eye", "iris"]
+    assert [p.name for p in sample.parts] == ["skin", "mouth", "teeth", "eye", "iris", "eye", "iris"]
+    assert [p.label for p in sample.parts] == ["face/Skin", "face/MouthInterior", "face/Teeth",
+                                               "eye_left_mesh/EyeSclera", "eye_left_mesh/Iris",
+                                               "eye_right_mesh/EyeSclera", "eye_right_mesh/Iris"]
     assert np.all(np.bincount(sample.part_ids) > 100)
     assert len(sample.extras["morph_targets"]) >= 8 and "jawOpen" in sample.extras["morph_targets"]
     assert sample.extras["animated_nodes"] == ["eye_left", "eye_right", "head"]

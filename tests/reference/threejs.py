@@ -132,8 +132,7 @@ def svg_frames(browser, svg: bytes, frames: Sequence[int]) -> np.ndarray:
 def colours_comparable(gltf: Path) -> bool:
     """True when every drawn primitive's colour is vertex colours or a baseColorFactor, with no texture.
 
-    (The player draws no textures; and we shade a texture's sRGB values in display space while three.js decodes
-    them to linear first, so no one output transform would make the numbers comparable.)"""
+    (The player draws no textures, so a textured primitive's colours are not compared.)"""
     doc, _ = parse_container(Path(gltf).read_bytes())
     materials = doc.get("materials") or []
     for mesh in doc.get("meshes") or []:
@@ -167,12 +166,12 @@ class Comparison:
 
 
 def compare(browser, gltf: Path, svg: bytes, frames: Sequence[int], clips: Clips = "all",
-            linear: bool = True, camera: dict | None = None) -> Comparison:
+            linear: bool = False, camera: dict | None = None) -> Comparison:
     """Our SVG against three.js playing gltf (clips) at our frames; colours only where comparable.
 
-    linear=True (default) compares our shaded colours with three.js's before its sRGB output transform: our
-    writer shows glTF's linear base colours as display values, so this checks the colours we read, not the
-    colour space (compare with linear=False to measure that)."""
+    Colours compare as displayed (three.js's sRGB output transform, the default): we read glTF's linear colours,
+    light them in linear light and encode them once, as three.js does. linear=True compares three.js's shaded
+    colours before that transform instead (they then differ from ours by the sRGB curve)."""
     meta = svg_metadata(svg)
     ours = svg_frames(browser, svg, frames)
     ref, info = threejs_frames(browser, gltf, meta, frames, clips, linear, camera)

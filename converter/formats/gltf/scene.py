@@ -1,9 +1,11 @@
 """glTF scene to FaceAnimation: node hierarchy, meshes and primitives, morph targets, animation channels.
 
-Supported: TRS/matrix nodes, several meshes and primitives (triangles, strips, fans), morph targets (POSITION),
-translation/rotation/scale/weights animation (sampling.py), COLOR_0 and baseColorFactor. Bytes, accessors and
-meshopt decoding live in container.py, accessors.py and meshopt.py; clip choice in clips.py; skinning in skin.py.
-Texture and material extensions are ignored (we draw flat base colours).
+Supported: TRS/matrix nodes, several meshes and primitives (triangles, strips, fans; one Part each, labelled
+node/material), morph targets (POSITION), translation/rotation/scale/weights animation (sampling.py), COLOR_0,
+baseColorFactor and base-colour textures (linear or sRGB, converted to display values: _Document.part).
+Bytes, accessors and meshopt decoding live in container.py, accessors.py and meshopt.py; clip choice in clips.py;
+skinning in skin.py.
+Material extensions and KHR_texture_transform are ignored.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from converter.animation import FaceAnimation
+from converter.animation import DEFAULT_PART_COLORS, FaceAnimation, Part
 from converter.errors import InputError
 from converter.formats.gltf.accessors import Accessors
 from converter.formats.gltf.clips import Tracks, choose, clip_label, summaries
@@ -24,7 +26,8 @@ from converter.formats.gltf.container import parse_container
 from converter.formats.gltf.sampling import keyframe_rate, sample, trs_matrices
 from converter.formats.gltf.skin import check_joint_indices, influences, joint_matrices, skin_positions
 from converter.formats.gltf.textures import decode_image, sample_texture
-from converter.formats.parts import collect_parts, part_name
+from converter.formats.parts import part_name
+from converter.lighting import linear_to_srgb
 
 DEFAULT_FPS = 30.0
 MAX_FRAMES = 100_000
@@ -107,24 +110,21 @@ class _Document(Accessors):
                              "lower --fps or trim the animation.")
         frames = np.concatenate([self.pose(order, instances, n_vertices, tracks, np.arange(n) / out_fps)
                                  for tracks, n in zip(played, counts)])
-        faces, keys, key_of_face, colors = [], [], [], []
+        faces, parts, part_of_face, colors = [], [], [], []
         morph_names: list[str] = []
         morph_count = offset = 0
-        for _, node, mesh, prims in instances:
+        for node_index, node, mesh, prims in instances:
             k = prims[0]["deltas"].shape[0]
             morph_count += k
             names = ((mesh.get("extras") or {}).get("targetNames") or []) if k else []
             morph_names += [str(n) for n in names if str(n) not in morph_names]
-            for p in prims:
+            for j, p in enumerate(prims):
                 faces.append(p["faces"] + offset)
-                material = self.item("materials", p["material"]) if p["material"] is not None else {}
-                keys.append((part_name(material.get("name"), mesh.get("name"), node.get("name")),
-                             self.base_color(material, textured=p["texture_colors"] is not None)))
-                key_of_face.append(np.full(len(p["faces"]), len(keys) - 1, np.int32))
-                own = p["colors"] if p["colors"] is not None else p["texture_colors"]  # vertex colours win
+                part, own = self.part(node_index, node, mesh, j, p)
+                parts.append(part)
+                part_of_face.append(np.full(len(p["faces"]), len(parts) - 1, np.int32))
                 colors.append(np.ones((len(p["positions"]), 3), np.float32) if own is None else own)
                 offset += len(p["positions"])
-        parts, part_of_key = collect_parts(keys)
         has_colors = any(p["colors"] is not None or p["texture_colors"] is not None
                          for *_, prims in instances for p in prims)
         flat = [j for take in chosen for j in take]
@@ -146,8 +146,8 @@ class _Document(Accessors):
         return FaceAnimation(
             frames=frames,
             faces=np.concatenate(faces).astype(np.int32),
-            part_ids=part_of_key[np.concatenate(key_of_face)],
-            parts=parts,
+            part_ids=np.concatenate(part_of_face),
+            parts=tuple(parts),
             fps=out_fps,
             name=self.name,
             vertex_colors=np.concatenate(colors) if has_colors else None,
@@ -280,8 +280,31 @@ class _Document(Accessors):
         """A node's name, or node<index>."""
         return str(self.item("nodes", index).get("name") or f"node{index}")
 
+    def part(self, node_index: int, node: dict, mesh: dict, j: int, p: dict) -> tuple[Part, np.ndarray | None]:
+        """One primitive's Part (semantic name, display colour, label node/material) and its display vertex colours.
+
+        glTF colours are linear (baseColorFactor, COLOR_0) or sRGB (base-colour textures); the pipeline's are display
+        values multiplied as such (converter/animation.py), so the vertex colours are srgb(factor * own) / part colour:
+        drawn, part times vertex colour is the spec's linear product, encoded once."""
+        material = self.item("materials", p["material"]) if p["material"] is not None else {}
+        own = p["colors"] if p["colors"] is not None else p["texture_colors"]  # both linear; COLOR_0 wins
+        factor = self.base_color(material, textured=own is not None)  # the spec's white under own colours
+        name = part_name(material.get("name"), mesh.get("name"), node.get("name"))
+        display = None
+        if factor is None:
+            rgb = np.asarray(DEFAULT_PART_COLORS[name], np.float32)  # already a display value
+        else:
+            rgb = linear_to_srgb(np.asarray(factor, np.float32))
+            if own is not None:
+                display = linear_to_srgb(own * np.asarray(factor, np.float32))
+                display = np.divide(display, rgb, out=np.zeros_like(display), where=rgb > 0).clip(0.0, 1.0)
+        what = material.get("name") or mesh.get("name") or (f"material{p['material']}" if p["material"] is not None
+                                                            else f"primitive{j}")
+        label = f"{self.node_label(node_index)}/{what}"
+        return Part(name, tuple(float(c) for c in rgb), label), display  # type: ignore[arg-type]
+
     def base_color(self, material: dict, textured: bool = False) -> tuple[float, float, float] | None:
-        """The material's baseColorFactor rgb (white under a sampled texture), or None for the part's default."""
+        """The material's linear baseColorFactor rgb (white under vertex or texture colours), or None: the default."""
         pbr = material.get("pbrMetallicRoughness") or {}
         factor = pbr.get("baseColorFactor")
         if factor is None:
@@ -365,7 +388,7 @@ class _Document(Accessors):
         return out
 
     def texture_colors(self, material: dict, attrs: dict, n_vertices: int, mesh_index: int) -> np.ndarray | None:
-        """(V, 3) base-colour texture sampled at the vertices' UVs, or None (no texture, or one we cannot read)."""
+        """(V, 3) linear base-colour texture at the vertices' UVs, or None (no texture, or one we cannot read)."""
         info = (material.get("pbrMetallicRoughness") or {}).get("baseColorTexture")
         if not isinstance(info, dict) or info.get("index") is None:
             return None
@@ -389,7 +412,8 @@ class _Document(Accessors):
         if uv.shape != (n_vertices, 2):
             raise InputError(f"{self.name}: {uv_key} of mesh {mesh_index} does not match its vertices.")
         sampler = self.item("samplers", texture["sampler"]) if texture.get("sampler") is not None else {}
-        return sample_texture(pixels, uv, sampler.get("wrapS", 10497), sampler.get("wrapT", 10497))
+        wrap = sampler.get("wrapS", 10497), sampler.get("wrapT", 10497)
+        return sample_texture(pixels, uv, *wrap, decode_srgb=True)
 
     def image(self, index: int) -> np.ndarray | None:
         """Decoded pixels of image index (cached), or None when missing or in a format Pillow cannot read."""

@@ -1,8 +1,8 @@
 """Base-colour textures sampled at the vertices: images decoded with Pillow, bilinear lookups with scipy.ndimage.
 
-The sampled colours are the texture's own (sRGB) values, the way a viewer shows an unlit textured surface; they
-become the primitive's vertex colours, so the flat and Gouraud outputs keep eyes, brows and lips painted in a
-texture. KHR_texture_transform is not applied.
+The sampled colours are the texture's own sRGB-encoded values; the scene decodes them to linear, multiplies the
+baseColorFactor (glTF 2.0) and makes them the primitive's vertex colours, so the flat and Gouraud outputs keep
+eyes, brows and lips painted in a texture. KHR_texture_transform is not applied.
 """
 
 from __future__ import annotations
@@ -13,6 +13,8 @@ import warnings
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 from scipy import ndimage
+
+from converter.lighting import srgb_to_linear
 
 MAX_TEXTURE_PIXELS = 1 << 26  # a 8192 x 8192 texture; larger ones are not decoded
 # glTF sampler wrap modes -> scipy.ndimage boundary modes (REPEAT is the default).
@@ -33,8 +35,11 @@ def decode_image(data: bytes) -> np.ndarray | None:
         return None
 
 
-def sample_texture(pixels: np.ndarray, uv: np.ndarray, wrap_s: int = 10497, wrap_t: int = 10497) -> np.ndarray:
-    """(V, 3) float32 colours 0..1 of pixels (H, W, 3) at texture coordinates uv (V, 2), bilinear, glTF wrap modes."""
+def sample_texture(pixels: np.ndarray, uv: np.ndarray, wrap_s: int = 10497, wrap_t: int = 10497,
+                   decode_srgb: bool = False) -> np.ndarray:
+    """(V, 3) float32 colours 0..1 of pixels (H, W, 3) at texture coordinates uv (V, 2), bilinear, glTF wrap modes.
+
+    decode_srgb: decode the texels to linear light before filtering (as a GPU filters an sRGB texture)."""
     h, w = pixels.shape[:2]
     # glTF UV (0, 0) is the image's top-left corner; pixel centres sit at half-integers.
     x = uv[:, 0] * w - 0.5
@@ -44,9 +49,10 @@ def sample_texture(pixels: np.ndarray, uv: np.ndarray, wrap_s: int = 10497, wrap
     if mode_s != mode_t:  # map_coordinates takes one mode: fold each axis into the image first
         x, y, mode = _wrap(x, w, mode_s), _wrap(y, h, mode_t), "nearest"
     out = np.empty((len(uv), 3), np.float32)
-    for c in range(3):
-        out[:, c] = ndimage.map_coordinates(pixels[..., c], [y, x], order=1, mode=mode, output=np.float32)
-    return np.clip(out / 255.0, 0.0, 1.0)
+    lut = (srgb_to_linear if decode_srgb else np.asarray)(np.arange(256, dtype=np.float32) / 255.0)
+    for c in range(3):  # one channel at a time: a float copy of a large texture is 4 bytes a texel
+        out[:, c] = ndimage.map_coordinates(lut[pixels[..., c]], [y, x], order=1, mode=mode, output=np.float32)
+    return np.clip(out, 0.0, 1.0)
 
 
 def _wrap(coord: np.ndarray, size: int, mode: str) -> np.ndarray:
