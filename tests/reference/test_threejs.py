@@ -1,7 +1,8 @@
 """Our SVG against three.js playing the same glTF (GLTFLoader + AnimationMixer) with the SVG's camera: IoU >= 0.98.
 
 Real files from other tools (../shared/data/real), the bundled sample, a generated morph + node-rotation
-scene and a generated skinned ICT face (neck, head and jaw joints plus morph targets, skinned_ict.py). Two MorphStressTest clips miss the target (strict xfail with the measured IoU, see KNOWN_MISSES).
+scene and a generated skinned ICT face (neck, head and jaw joints plus morph targets, skinned_ict.py).
+Two MorphStressTest clips miss the target (strict xfail with the measured IoU, see KNOWN_MISSES).
 """
 
 from __future__ import annotations
