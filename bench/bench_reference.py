@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -15,9 +16,10 @@ from playwright.sync_api import sync_playwright
 from converter.convert import convert
 from converter.errors import InputError
 from converter.formats.gltf import parse_container
+from converter.formats.ictfacekit import load_ict_head
 from converter.options import ConversionOptions
 from tests.conftest import CHROMIUM_ARGS, SAMPLE, SHARED_DATA, chromium_path
-from tests.reference import threejs
+from tests.reference import skinned_ict, threejs
 
 TITLE = "Real files against three.js"
 
@@ -41,10 +43,10 @@ def cases() -> list[tuple[Path, int | None]]:
     return out
 
 
-def row(browser, path: Path, clip: int | None) -> str:
+def row(browser, path: Path, clip: int | None, label: str | None = None) -> str:
     """One table row: convert at the default options (that clip), then compare 5 frames with three.js."""
     names = clip_names(path)
-    label = path.name if clip is None else f"{path.name} [{names[clip]}]"
+    label = label or (path.name if clip is None else f"{path.name} [{names[clip]}]")
     if clip is None and len(names) > 1:
         label += f" [{names[0]}: the first of {len(names)} clips]"
     options = ConversionOptions() if clip is None else ConversionOptions.from_mapping({"animation": str(clip)})
@@ -77,10 +79,14 @@ def run() -> str:
         browser = pw.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
         try:
             rows += [row(browser, path, clip) for path, clip in cases()]
+            with tempfile.TemporaryDirectory() as tmp:  # tests/reference/skinned_ict.py, as the reference test builds it
+                path = Path(tmp) / "skinned_ict.glb"
+                path.write_bytes(skinned_ict.skinned_face(load_ict_head(SHARED_DATA / "ict_facekit")))
+                rows.append(row(browser, path, None, "generated skinned ICT head (root/neck/head/jaw, 3 morph targets)"))
         finally:
             browser.close()
-    return (f"`facesvg convert` at the default options (512 px) on the bundled sample and every glTF with a mesh in "
-            "../shared/data/real, one run each (convert s: load to SVG bytes, wall time on a shared machine). "
+    return (f"`facesvg convert` at the default options (512 px) on the bundled sample, every glTF with a mesh in "
+            "../shared/data/real and the generated skinned ICT head (tests/reference/skinned_ict.py), one run each (convert s: load to SVG bytes, wall time on a shared machine). "
             f"three.js {threejs.three_version()} (tests/reference) plays the same file (the same clip) in headless "
             "Chromium with the camera of the SVG's metadata; min IoU is the worst silhouette IoU of 5 frames spread "
             "over the animation. Colour diff: mean |RGB| in 8-bit levels inside both silhouettes, shaded with our "

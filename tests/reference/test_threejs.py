@@ -1,7 +1,8 @@
 """Our SVG against three.js playing the same glTF (GLTFLoader + AnimationMixer) with the SVG's camera: IoU >= 0.98.
 
-Real files from other tools (../shared/data/real), the bundled sample and a generated morph + node-rotation
-scene. Two MorphStressTest clips miss the target (strict xfail with the measured IoU, see KNOWN_MISSES).
+Real files from other tools (../shared/data/real), the bundled sample, a generated morph + node-rotation
+scene and a generated skinned ICT face (neck, head and jaw joints plus morph targets, skinned_ict.py).
+Two MorphStressTest clips miss the target (strict xfail with the measured IoU, see KNOWN_MISSES).
 """
 
 from __future__ import annotations
@@ -20,8 +21,9 @@ from converter.convert import convert
 from converter.errors import InputError
 from converter.export.gltf_builder import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, GltfBuilder
 from converter.formats.gltf import parse_container
+from converter.formats.ictfacekit import load_ict_head
 from converter.options import ConversionOptions
-from tests.reference import threejs
+from tests.reference import skinned_ict, threejs
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -188,6 +190,16 @@ def test_generated_take_split_per_target_plays_whole(player, tmp_path):
     assert not isinstance(svg, InputError), svg
     result = check(player, path, svg, "all", "generated_split_take")
     assert result.played == ["rotation", "weights"]
+
+
+@pytest.mark.parametrize("weights", ["float", "ubyte"])
+def test_generated_skinned_ict_face_matches_threejs(player, shared_data, tmp_path, weights):
+    """Neck turn, head nod, jaw opening and three morph targets on the ICT face; WEIGHTS_0 as float or unorm8."""
+    path = tmp_path / f"skinned_ict_{weights}.glb"
+    path.write_bytes(skinned_ict.skinned_face(load_ict_head(shared_data / "ict_facekit"), weights == "ubyte"))
+    result = check(player, path, ours(path), "all", f"skinned_ict_{weights}")
+    assert result.played == ["talk_and_turn"]
+    assert max(result.colour) <= MAX_COLOUR, f"mean colour difference per frame {result.colour}"
 
 
 def test_comparison_fails_on_a_shifted_camera(player, generated):
