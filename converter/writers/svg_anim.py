@@ -3,7 +3,7 @@
 Three encodings of the same document structure:
 
 - ``raw`` (options.raw): the chapter's unoptimised file, every frame's coordinates with 2 decimals, fill,
-  stroke and visibility as discrete animations where they change.
+  stroke and display (the chapter's visibility) as discrete animations where they change.
 - ``chapter``: the chapter's post-optimisations of the raw file: no coordinates while a triangle is hidden and
   runs where a visible triangle does not move merged, placed with keyTimes (exact to 2 decimals); a path keeps
   every frame where keyTimes would cost more (the chapter's own remark on long dynamic sequences).
@@ -13,9 +13,11 @@ Three encodings of the same document structure:
   where that is shorter); integer coordinates in a viewBox scaled so rounding is part of the same budget;
   relative path syntax; static triangles without <animate>; fill and stroke are currentColor, the colour
   keyed linearly within COLOR_TOLERANCE levels and its first value a shared CSS class; visibility a discrete
-  class animation; never-visible triangles dropped.
+  class animation (the hidden class sets display:none); never-visible triangles dropped.
 
 Frame k shows at t = k / fps; dur = T / fps; linear animations end with a key at keyTime 1 (the loop end).
+Every static attribute (group transform, d, colour class, display) holds frame 0 as played, so a renderer
+that ignores SMIL (resvg, CairoSVG, rsvg-convert, Inkscape, thumbnailers) draws frame 0.
 """
 
 from __future__ import annotations
@@ -133,7 +135,7 @@ def _style(palette: np.ndarray, scale: int) -> str:
     rules = "".join(f".c{i}{{color:{c}}}" for i, c in enumerate(_hex(palette).tolist()))
     sw = svg_number(STROKE_PX * scale, 3)
     return (f"<style>path{{fill:currentColor;stroke:currentColor;stroke-width:{sw};stroke-linejoin:round}}"
-            f".{HIDDEN_CLASS}{{visibility:hidden}}{rules}</style>")
+            f".{HIDDEN_CLASS}{{display:none}}{rules}</style>")
 
 
 def write_still(sheet: Sheet, options: ConversionOptions, report: Report, frame: int) -> bytes:
@@ -282,13 +284,13 @@ def raw_values_bytes(track: np.ndarray) -> int:
 def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.ndarray, dur: str,
                 chapter: bool = False) -> list[str]:
     """The raw file: every frame's coordinates (2 decimals) as evenly spaced values (frame k at k/T, the last
-    held to T); fill, stroke and visibility as discrete animations where they change. With chapter=True the
+    held to T); fill, stroke and display as discrete animations where they change. With chapter=True the
     chapter's post-optimisations: coordinates only at frames that need them (nothing while hidden, a still
     run reduced to its two ends) placed with keyTimes, exact to 2 decimals."""
     t, p = active.shape
     colors = hex_colors(sheet.face_rgb[:, tris]).tolist()  # (T, P)
     kt = key_times(np.arange(t + 1), t, 6, "early")
-    vis = _discrete("visibility", active.astype(np.int64), ["hidden", "visible"], kt, dur)
+    vis = _discrete("display", active.astype(np.int64), ["none", "inline"], kt, dur)
     names_arr, fill_codes = np.unique(np.asarray(colors), return_inverse=True)
     fills = _discrete("fill", fill_codes.reshape(t, p), names_arr.tolist(), kt, dur)
     strokes = [a.replace('"fill"', '"stroke"', 1) for a in fills]
@@ -318,7 +320,7 @@ def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.nd
                     if t > 1 else "")
         attrs = f'id="{ids[j]}" d="{first}" fill="{colors[0][j]}" stroke="{colors[0][j]}"'
         if not active[0, j]:
-            attrs += ' visibility="hidden"'
+            attrs += ' display="none"'  # not visibility: Inkscape draws visibility:hidden paths
         out.append(f"<path {attrs}>{anim}{vis[j]}{fills[j]}{strokes[j]}</path>")
     return out
 
@@ -363,14 +365,15 @@ def _varying(mask: np.ndarray, rows: np.ndarray) -> np.ndarray:
 
 def _uniform_instead(attribute: str, track: np.ndarray, active: np.ndarray, counts: np.ndarray,
                      keyed_len: np.ndarray, value_len: np.ndarray, scale: float, radius: float | np.ndarray,
-                     pairs: bool, fmt, dur: str, anims: list[str]) -> int:
+                     pairs: bool, fmt, dur: str, anims: list[str]) -> dict[int, np.ndarray]:
     """Replace a path's keyed animation by evenly spaced keys (no keyTimes) where that is shorter.
 
     Evenly spaced values are least-squares fitted and checked exactly (rounding included) against the bound
     (Euclidean per 2D point when pairs, else per coordinate), so they often need no more keys than the greedy
     pass and save the keyTimes text. counts: greedy keys per path; keyed_len: its animation's length; value_len:
     the typical length of one value; fmt(values (K, D) ints, path index) -> K strings. anims is updated in place;
-    returns how many paths changed."""
+    returns the new values (K, D) of the paths changed (their first is the frame-0 value the static attribute
+    must hold)."""
     t, p = active.shape
     ladder = np.unique(np.round(np.geomspace(2, t + 1, 48)).astype(np.int64))
     values: dict[int, np.ndarray] = {}
@@ -390,7 +393,7 @@ def _uniform_instead(attribute: str, track: np.ndarray, active: np.ndarray, coun
     for j in sorted(values):
         anims[j] = (f'<animate attributeName="{attribute}" dur="{dur}" repeatCount="indefinite" '
                     f'values="{";".join(fmt(values[j], j))}"/>')
-    return len(values)
+    return values
 
 
 def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: np.ndarray, track: np.ndarray,
@@ -426,9 +429,11 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     counts = keys.mask.sum(axis=0)
     d_len = np.array([len(a) for a in d_anims])
     per_key = np.bincount(pk, np.fromiter(map(len, text), np.float64, len(text)), p) / np.maximum(counts, 1)
-    n_uniform = _uniform_instead("d", track, active, counts, d_len, per_key, view_scale,
+    d_uniform = _uniform_instead("d", track, active, counts, d_len, per_key, view_scale,
                                  bound, True, lambda v, j: _path_strings(v, np.broadcast_to(off[j], (len(v), 2))),
                                  dur, d_anims)
+    for j in [j for j in d_uniform if active[0, j]]:  # the static d holds frame 0 as played where it is shown
+        d_first[j] = _path_strings(d_uniform[j][:1], off[j:j + 1])[0]
     # Colour: linear keys within the colour tolerance; the first key's colour is the path's class.
     ckeys = color_keys(sheet.face_rgb[:, tris], active, color_tol)
     cpk, cfk = np.nonzero(ckeys.mask.T)
@@ -438,12 +443,16 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     c_anims, _, n_color_keys = _linear("color", ckeys.mask, _hex(crow).tolist(), key_times(cfk, t, c_dec), dur,
                                        c_vary)
     c_len = np.array([len(a) for a in c_anims])
-    n_uniform += _uniform_instead("color", sheet.face_rgb[:, tris].astype(np.float64) * 255, active,
+    c_uniform = _uniform_instead("color", sheet.face_rgb[:, tris].astype(np.float64) * 255, active,
                                   ckeys.mask.sum(axis=0), c_len, np.full(p, 7.0), 1.0, color_tol - COLOR_SLACK, False,
                                   lambda v, j: _hex(np.clip(v, 0, 255)).tolist(), dur, c_anims)
+    n_uniform = len(d_uniform) + len(c_uniform)
     cbounds = np.searchsorted(cpk, np.arange(p + 1))[:-1]
     packed = (crow[:, 0] << 16) | (crow[:, 1] << 8) | crow[:, 2]
     base = packed[np.minimum(cbounds, max(len(packed) - 1, 0))] if len(packed) else np.zeros(p, np.int64)
+    for j in [j for j in c_uniform if active[0, j]]:  # the class colour is frame 0's as played where shown
+        c0 = np.clip(c_uniform[j][0], 0, 255).astype(np.int64)
+        base[j] = (c0[0] << 16) | (c0[1] << 8) | c0[2]
     values, counts = np.unique(base, return_counts=True)
     rank = np.lexsort((values, -counts))  # the most used colour gets the shortest class name
     remap = np.empty(len(values), np.int64)

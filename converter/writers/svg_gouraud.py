@@ -316,15 +316,17 @@ def _chapter_triangle(e: _Emit, f: int, vis: tuple[str, str], stroked: bool) -> 
 
 
 def _visibility(seen: np.ndarray, dur: str) -> tuple[str, str]:
-    """(initial visibility attribute, discrete <animate> of the changes or '') for one triangle's (T,) bits."""
+    """(initial display attribute, discrete <animate> of the changes or '') for one triangle's (T,) bits.
+
+    display, not visibility: static renderers that ignore SMIL (Inkscape) draw visibility:hidden anyway."""
     t = len(seen)
-    initial = "" if seen[0] else ' visibility="hidden"'
+    initial = "" if seen[0] else ' display="none"'
     changes = np.concatenate([[0], np.flatnonzero(seen[1:] != seen[:-1]) + 1])
     if len(changes) == 1:
         return initial, ""
-    values = ";".join("visible" if seen[k] else "hidden" for k in changes.tolist())
+    values = ";".join("inline" if seen[k] else "none" for k in changes.tolist())
     return initial, (
-        f'<animate attributeName="visibility" calcMode="discrete" dur="{dur}" repeatCount="indefinite" '
+        f'<animate attributeName="display" calcMode="discrete" dur="{dur}" repeatCount="indefinite" '
         f'keyTimes="{_key_times(changes, t, floor=True)}" values="{values}"/>'
     )
 
