@@ -29,7 +29,7 @@ class Framing(NamedTuple):
 
 def candidates(anim: FaceAnimation) -> list[str]:
     """The names --frame-on accepts for this animation: its parts, then its glTF nodes and meshes."""
-    names = [p.name for p in anim.parts]
+    names = list(dict.fromkeys(p.name for p in anim.parts))  # several primitives can share a part name
     for node, _, mesh, _ in anim.extras.get("node_tree", ()):
         for n in (node, mesh):
             if n and n not in names:
