@@ -5,12 +5,13 @@ renderer draws what Chromium draws paused at t = 0. Renderers are compared at zo
 the 0.5 px seam strokes on small triangles differs between rasterisers (the 192 px synthetic head measures SSIM
 0.986 resvg vs Chromium at 1x although its static attributes are exactly frame 0, 0.9975 at 2x); a head group
 whose position lives only in its animation (the bug this guards against) measures 0.81 at 2x. resvg is a test
-dependency and required; rsvg-convert and CairoSVG are checked where installed (CI requires only resvg).
+dependency; rsvg-convert and CairoSVG skip locally where missing and are required under CI (.ci/run installs them).
 """
 
 from __future__ import annotations
 
 import io
+import os
 import re
 import shutil
 import subprocess
@@ -61,10 +62,17 @@ def _resvg(svg: bytes) -> np.ndarray:
     return _png(bytes(resvg_py.svg_to_bytes(svg_string=svg.decode(), zoom=ZOOM)))
 
 
+def _missing(why: str) -> None:
+    """Skip locally; under CI every renderer must be there (.ci/run and the test extras install them)."""
+    if os.environ.get("CI"):
+        pytest.fail(f"{why}, but CI is set")
+    pytest.skip(why)
+
+
 def _rsvg(svg: bytes) -> np.ndarray:
     exe = shutil.which("rsvg-convert")
     if exe is None:
-        pytest.skip("rsvg-convert not installed (apt-get install librsvg2-bin); CI requires only resvg")
+        _missing("rsvg-convert not installed (apt-get install librsvg2-bin)")
     return _png(subprocess.run([exe, "--zoom", str(ZOOM)], input=svg, capture_output=True, check=True).stdout)
 
 
@@ -72,7 +80,7 @@ def _cairosvg(svg: bytes) -> np.ndarray:
     try:
         import cairosvg
     except (ImportError, OSError):  # OSError: the package without libcairo
-        pytest.skip("CairoSVG (with libcairo) not installed; CI requires only resvg")
+        _missing("CairoSVG (with libcairo) not installed (pip install cairosvg; apt-get install libcairo2)")
     return _png(cairosvg.svg2png(bytestring=svg, scale=ZOOM))
 
 
@@ -93,9 +101,17 @@ def chromium_t0(browser, outputs) -> dict[str, np.ndarray]:
     return {k: chromium_frame(browser, svg, 0.0, *_size(svg), scale=ZOOM) for k, svg in outputs.items()}
 
 
+# A measured miss, kept visible (strict: it fails the suite once it passes): CairoSVG strokes the Gouraud
+# file's seam strokes in black along many edges (SSIM 0.950; see .artifacts/first_frame_gouraud_cairosvg.png).
+KNOWN_MISSES = {("gouraud", "cairosvg"): 0.9502}
+
+
 @pytest.mark.parametrize("renderer", RENDERERS)
 @pytest.mark.parametrize("case", CASES)
-def test_static_renderer_draws_frame_0_like_chromium(outputs, chromium_t0, artifacts, case, renderer):
+def test_static_renderer_draws_frame_0_like_chromium(outputs, chromium_t0, artifacts, case, renderer, request):
+    if (case, renderer) in KNOWN_MISSES:
+        why = f"{renderer} draws {case} frame 0 at SSIM {KNOWN_MISSES[case, renderer]} < {MIN_SSIM} (issue 18)"
+        request.applymarker(pytest.mark.xfail(strict=True, raises=AssertionError, reason=why))
     img = RENDERERS[renderer](outputs[case])
     ref = chromium_t0[case]
     assert img.shape == ref.shape
