@@ -18,9 +18,9 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import NamedTuple
 
-from playwright.sync_api import Browser, sync_playwright
+from playwright.sync_api import Browser
 
-from tests.conftest import CHROMIUM_ARGS, chromium_path
+from tests.conftest import chromium_path, launched_chromium
 
 
 class Playback(NamedTuple):
@@ -58,12 +58,8 @@ def chromium() -> Iterator[Browser]:
     exe = chromium_path()
     if not exe:
         raise RuntimeError("Chromium is not installed (apt-get install chromium)")
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS)
-        try:
-            yield browser
-        finally:
-            browser.close()
+    with launched_chromium(exe) as browser:
+        yield browser
 
 
 _START_RAF = """() => { window.__fsv = {n: 0, t0: null, t1: null, run: true};

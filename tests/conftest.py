@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import re
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -125,6 +126,13 @@ def browser():
         if os.environ.get("CI"):
             pytest.fail("Chromium is not installed but CI is set: .ci/run must install it")
         pytest.skip("Chromium not installed (apt-get install chromium)")
+    with launched_chromium(exe) as b:
+        yield b
+
+
+@contextmanager
+def launched_chromium(exe: str):
+    """Chromium at exe, headless with this project's flags, for the length of the block (tests and bench)."""
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as pw:

@@ -144,6 +144,16 @@ class Outcome:
         )
 
 
+def recovery_times(hit: list, states: dict) -> list[float]:
+    """Per kill: seconds from the kill to the last job that was running then being finished."""
+    out = []
+    for when, was_running in hit:
+        ends = [states[j]["finished"] for j in was_running if states.get(j) and states[j].get("finished")]
+        if ends:
+            out.append(max(ends) - when)
+    return out
+
+
 def settle_all(url_of, ids: list[str], timeout: float) -> dict:
     """Poll until every job is done or failed (or the deadline); {id: last JSON or None if 404}."""
     end = time.monotonic() + timeout
@@ -245,10 +255,7 @@ def embedded_run(instance: Path, seed: int, n: int = 20, kills: int = 3, timeout
                 server = Serve(instance).wait_up()
                 out.restarts += 1
         states = settle_all(lambda: server.url, ids, timeout)
-        for when, was_running in hit:
-            ends = [states[j]["finished"] for j in was_running if states.get(j) and states[j].get("finished")]
-            if ends:
-                out.recovery.append(max(ends) - when)
+        out.recovery += recovery_times(hit, states)
         judge(server.url, ids, states, instance / "jobs", out)
     finally:
         server.stop()
@@ -340,10 +347,7 @@ def rq_run(instance: Path, redis_url: str, seed: int, n: int = 20, kills: int = 
                 workers[workers.index(victim)] = RQWorker(redis_url)
                 out.restarts += 1
         states = settle_all(lambda: server.url, ids, timeout)
-        for when, was_running in hit:
-            ends = [states[j]["finished"] for j in was_running if states.get(j) and states[j].get("finished")]
-            if ends:
-                out.recovery.append(max(ends) - when)
+        out.recovery += recovery_times(hit, states)
         judge(server.url, ids, states, instance / "jobs", out)
     finally:
         for w in workers:
