@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import socket
@@ -126,6 +127,27 @@ def app(request, tmp_path):
 @pytest.fixture
 def client(app):
     return app.test_client()
+
+
+@contextlib.contextmanager
+def workers_held(queue):
+    """Embedded backend: no worker claims while inside (records added as queued stay queued); then new workers.
+
+    The embedded workers claim any queued row of the table within a poll, so a test that plants a queued
+    record and expects it to stay queued races them without this. RQ workers take only what is enqueued.
+    """
+    from webapp.workers import WorkerPool
+
+    pool = getattr(queue, "pool", None)
+    if pool is None:
+        yield
+        return
+    pool.close(wait=True)
+    try:
+        yield
+    finally:
+        queue.pool = WorkerPool(queue.store, queue.storage, queue.workers, queue.kind, queue.lease_seconds,
+                                queue.retries, queue.preview_frames)
 
 
 def wait_job(client, job_id: str, timeout: float = 120.0) -> dict:

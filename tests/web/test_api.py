@@ -12,7 +12,7 @@ import zipfile
 import pytest
 from lxml import etree
 
-from web.conftest import SMALL, glb_bytes, make_app, wait_job
+from web.conftest import SMALL, glb_bytes, make_app, wait_job, workers_held
 from webapp.jobstore import RUNNING, Job
 
 
@@ -205,33 +205,35 @@ def test_unknown_and_unfinished_jobs(app, client):
     assert "<html" in client.get("/jobs/" + "0" * 32).get_data(as_text=True)
     assert client.get("/api/v1/jobs?limit=x").status_code == 400
     q = app.extensions["facesvg_queue"]
-    q.store.add(Job(id="a" * 32, created=time.time()))  # a queued record no worker was told about
-    assert client.get("/api/v1/jobs/" + "a" * 32).get_json()["state"] == "queued"
-    assert client.get("/api/v1/jobs/" + "a" * 32 + "/result").status_code == 409
-    assert client.get("/api/v1/jobs/" + "a" * 32 + "/result/svg").status_code == 409
-    assert client.get("/api/v1/jobs/" + "a" * 32 + "/result/exe").status_code == 404
-    assert client.get("/api/v1/jobs/" + "a" * 32 + "/preview/0").status_code == 409
-    page = client.get("/jobs/" + "a" * 32).get_data(as_text=True)
-    assert 'id="progress"' in page
+    with workers_held(q):
+        q.store.add(Job(id="a" * 32, created=time.time()))  # a queued record no worker was told about
+        assert client.get("/api/v1/jobs/" + "a" * 32).get_json()["state"] == "queued"
+        assert client.get("/api/v1/jobs/" + "a" * 32 + "/result").status_code == 409
+        assert client.get("/api/v1/jobs/" + "a" * 32 + "/result/svg").status_code == 409
+        assert client.get("/api/v1/jobs/" + "a" * 32 + "/result/exe").status_code == 404
+        assert client.get("/api/v1/jobs/" + "a" * 32 + "/preview/0").status_code == 409
+        page = client.get("/jobs/" + "a" * 32).get_data(as_text=True)
+        assert 'id="progress"' in page
 
 
 def test_delete_semantics(app, client):
     q = app.extensions["facesvg_queue"]
-    # queued -> cancelled and removed
-    q.store.add(Job(id="b" * 32, created=time.time()))
-    q.storage.inputs("b" * 32)
-    assert client.delete("/api/v1/jobs/" + "b" * 32).status_code == 204
-    assert client.get("/api/v1/jobs/" + "b" * 32).status_code == 404
-    assert "b" * 32 not in q.storage.job_ids()
-    # running -> 202 cancelling; the worker's next progress step stops it and removes the job
-    q.store.add(Job(id="c" * 32, created=time.time()))
-    assert q.store.claim("c" * 32)
-    r = client.delete("/api/v1/jobs/" + "c" * 32)
-    assert r.status_code == 202 and r.get_json()["state"] == "cancelling"
-    from webapp.runner import JobCancelled, ProgressRecorder
+    with workers_held(q):  # the queued and the running record must stay as planted
+        # queued -> cancelled and removed
+        q.store.add(Job(id="b" * 32, created=time.time()))
+        q.storage.inputs("b" * 32)
+        assert client.delete("/api/v1/jobs/" + "b" * 32).status_code == 204
+        assert client.get("/api/v1/jobs/" + "b" * 32).status_code == 404
+        assert "b" * 32 not in q.storage.job_ids()
+        # running -> 202 cancelling; the worker's next progress step stops it and removes the job
+        q.store.add(Job(id="c" * 32, created=time.time()))
+        assert q.store.claim("c" * 32)
+        r = client.delete("/api/v1/jobs/" + "c" * 32)
+        assert r.status_code == 202 and r.get_json()["state"] == "cancelling"
+        from webapp.runner import JobCancelled, ProgressRecorder
 
-    with pytest.raises(JobCancelled):
-        ProgressRecorder(q.store, "c" * 32)("extract", 0.5)
+        with pytest.raises(JobCancelled):
+            ProgressRecorder(q.store, "c" * 32)("extract", 0.5)
     # finished -> 204 and the files are gone
     job = converted(client)
     assert client.delete(f"/api/v1/jobs/{job['id']}").status_code == 204

@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from web.conftest import SMALL, glb_bytes, make_app, wait_job
+from web.conftest import SMALL, glb_bytes, make_app, wait_job, workers_held
 from webapp.jobstore import DONE, QUEUED, RUNNING, Job
 
 
@@ -112,11 +112,11 @@ def test_rate_limit_and_queue_cap_answer_with_retry_after(tmp_path):
     app = make_app(tmp_path / "b", "embedded", FACESVG_QUEUE_CAP=2, FACESVG_RATE_LIMIT=0)
     q = app.extensions["facesvg_queue"]
     try:
-        for i in range(2):  # two jobs sit in the table as queued (the workers are made to wait)
-            q.store.add(Job(id=f"{i:032x}", created=time.time(), options={}, files={}))
-        # hold the queued records: mark them running under a live lease so no worker takes them
-        for i in range(2):
-            q.store.transition(f"{i:032x}", (QUEUED,), state=RUNNING, owner="held", lease=time.time() + 600)
+        with workers_held(q):  # two jobs sit in the table, held running under a live lease no worker owns
+            for i in range(2):
+                q.store.add(Job(id=f"{i:032x}", created=time.time(), options={}, files={}))
+                assert q.store.transition(f"{i:032x}", (QUEUED,), state=RUNNING, owner="held",
+                                          lease=time.time() + 600)
         r = post(app.test_client())
         assert r.status_code == 503 and r.headers["Retry-After"] == "30"
         assert len(q.recent(10)) == 2  # nothing new was stored
