@@ -1,6 +1,7 @@
 """The ICT FaceKit head (MIT): neutral mesh, parts by material, expression shapes as deltas, landmarks.
 
-Dataset tooling, not part of the library: samples/make_sample.py, samples/make_fdp.py, bench and tests read it.
+An input format: `convert FACE --weights CAPTURE` reads an ICT FaceKit folder as a face with named morph targets
+(converter/formats/morphs.py). The sample scripts (samples/make_sample.py, make_fdp.py), bench and tests read it too.
 """
 
 from __future__ import annotations
