@@ -20,13 +20,17 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from converter import blendshapes
+from converter.convert import convert
 from converter.formats.morphs import load_morph_face
 from converter.formats.weights import read_weights
+from converter.options import ConversionOptions
 
 TITLE = "ARKit weight captures on the ICT head"
 ICT = ROOT.parent / "shared" / "data" / "ict_facekit"
 LLF = ROOT.parent / "shared" / "data" / "real" / "livelinkface_MySlate_3.csv"
 LONG_FRAMES = 4000
+# End to end (`facesvg convert ICT --weights long.csv`): the mobile preset's options and the defaults.
+CONVERT_RUNS = (("mobile preset (1,500 triangles, 256 px)", {"max_triangles": 1500, "size": 256}), ("defaults", {}))
 
 
 def write_capture(path: Path, n_frames: int) -> None:
@@ -62,6 +66,20 @@ def child(n_frames: int) -> None:
                       "frames_mb": anim.frames.nbytes / 2 ** 20}))
 
 
+def child_convert(n_frames: int, options: dict) -> None:
+    """Run in the child: the whole conversion of the head driven by an n_frames capture; one JSON line."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "long.csv"
+        write_capture(path, n_frames)
+        c0, t0 = time.process_time(), time.perf_counter()
+        result = convert(ICT, ConversionOptions.from_mapping({**options, "weights": str(path)}))
+        c1, t1 = time.process_time(), time.perf_counter()
+    r = result.report
+    print(json.dumps({"cpu": c1 - c0, "wall": t1 - t0, "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                      "bytes": len(result.data), "triangles": r.counts.get("paths", 0),
+                      "timings": {k: round(v, 1) for k, v in r.timings.items()}}))
+
+
 def run() -> str:
     face = load_morph_face(ICT)
     track = read_weights(LLF)
@@ -70,6 +88,16 @@ def run() -> str:
     out = subprocess.run([sys.executable, __file__, "--child", str(LONG_FRAMES)], capture_output=True, text=True,
                          check=True)
     r = json.loads(out.stdout.strip().splitlines()[-1])
+    rows = []
+    for label, opts in CONVERT_RUNS:
+        got = subprocess.run([sys.executable, __file__, "--convert", str(LONG_FRAMES), json.dumps(opts)],
+                             capture_output=True, text=True)
+        if got.returncode:
+            rows.append(f"| {label} | failed: {(got.stderr.strip().splitlines() or ['?'])[-1][:120]} | | | | |")
+            continue
+        e = json.loads(got.stdout.strip().splitlines()[-1])
+        rows.append(f"| {label} | {e['cpu']:.0f} | {e['wall']:.0f} | {e['rss_mb']:,.0f} | {e['triangles']:,} paths, "
+                    f"{e['bytes'] / 2 ** 20:.1f} MB | {', '.join(f'{k} {v:g}' for k, v in e['timings'].items())} |")
     return "\n".join([
         f"Live Link Face take `{LLF.name}` ({track.n_frames} frames, {track.fps:g} fps, {len(track.names)} weights) "
         f"on the ICT FaceKit head ({len(face.names)} ARKit-named shapes):",
@@ -87,11 +115,20 @@ def run() -> str:
         "|---|---|---|---|---|---|---|",
         f"| {r['frames']} | {r['load_cpu']:.1f} | {r['read_cpu']:.1f} | {r['drive_cpu']:.1f} | {r['wall']:.1f} | "
         f"{r['rss_mb']:.0f} | {r['frames_mb']:.0f} |",
+        "",
+        f"The whole conversion (`facesvg convert ICT --weights long.csv`, {LONG_FRAMES} frames) in one child process "
+        "each (wall s: the stage timings are wall seconds on a shared machine):",
+        "",
+        "| options | CPU s | wall s | peak RSS MB | output | stage wall s |",
+        "|---|---|---|---|---|---|",
+        *rows,
     ])
 
 
 if __name__ == "__main__":
     if len(sys.argv) == 3 and sys.argv[1] == "--child":
         child(int(sys.argv[2]))
+    elif len(sys.argv) == 4 and sys.argv[1] == "--convert":
+        child_convert(int(sys.argv[2]), json.loads(sys.argv[3]))
     else:
         print(run())

@@ -131,14 +131,12 @@ class EmbeddedQueue(JobQueue):
         """Settle jobs a previous server left running whose lease has expired (queued ones just wait)."""
         requeued, failed = [], []
         for job in expired(self.store):
-            outcome = settle(self.store, job.id, job.owner, self.retries, "the server stopped while it ran")
+            outcome = settle(self.store, self.storage, job.id, job.owner, self.retries,
+                             "the server stopped while it ran")
             if outcome == "requeued":
                 requeued.append(job.id)
             elif outcome == "failed":
                 failed.append(job.id)
-            elif outcome == "cancelled":  # a DELETE arrived before the stop: finish it
-                self.store.remove(job.id)
-                self.storage.delete(job.id)
         return {"requeued": requeued, "failed": failed}
 
     def _enqueue(self, job_id: str) -> None:
@@ -195,12 +193,9 @@ class RQQueue(JobQueue):
         """Settle jobs whose horse stopped renewing the lease; re-queued ones go back on the RQ queue."""
         settled = []
         for job in expired(self.store):
-            outcome = settle(self.store, job.id, job.owner, self.retries, "its worker stopped answering")
+            outcome = settle(self.store, self.storage, job.id, job.owner, self.retries, "its worker stopped answering")
             if outcome == "requeued":
                 self._enqueue(job.id)
-            elif outcome == "cancelled":
-                self.store.remove(job.id)
-                self.storage.delete(job.id)
             if outcome:
                 settled.append(job.id)
         return settled

@@ -21,6 +21,7 @@ import uuid
 from pathlib import Path
 
 from webapp.jobstore import CANCELLING, FAILED, QUEUED, RUNNING, JobStore
+from webapp.storage import Storage
 
 log = logging.getLogger("facesvg.webapp")
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
@@ -118,17 +119,22 @@ class Heartbeat:
                 log.warning("job %s: lease renewal failed (%r); retrying", self.job_id, exc)
 
 
-def settle(store: JobStore, job_id: str, owner: str, retries: int, why: str) -> str | None:
+def settle(store: JobStore, storage: Storage, job_id: str, owner: str, retries: int, why: str) -> str | None:
     """The holder of a job died: re-queue it while retries remain, else fail it; the outcome, or None if raced.
 
-    A job being cancelled (DELETE while it ran) is marked cancelled, and removed by the caller.
+    A job being cancelled (DELETE while it ran) is marked cancelled, then removed with its files, as the DELETE
+    asked.
     """
     job = store.get(job_id)
     if job is None or job.owner != owner or job.state not in (RUNNING, CANCELLING):
         return None
     if job.state == CANCELLING:
-        return "cancelled" if store.transition(job_id, (CANCELLING,), holder=owner, state="cancelled",
-                                               owner="", finished=time.time()) else None
+        if not store.transition(job_id, (CANCELLING,), holder=owner, state="cancelled", owner="",
+                                finished=time.time()):
+            return None
+        store.remove(job_id)
+        storage.delete(job_id)
+        return "cancelled"
     if job.attempts <= retries:
         if store.transition(job_id, (RUNNING,), holder=owner, state=QUEUED, owner="", lease=0.0, progress=0.0,
                             stage=f"re-queued: {why}"):

@@ -14,7 +14,7 @@ import os
 import threading
 import time
 
-from webapp.jobstore import RUNNING, JobStore, open_store
+from webapp.jobstore import CANCELLING, RUNNING, JobStore, open_store
 from webapp.lease import die_with_parent, expired, new_owner, settle
 from webapp.runner import execute
 from webapp.storage import Storage
@@ -116,13 +116,9 @@ class WorkerPool:
     def settle_owner(self, owner: str, why: str) -> list[str]:
         """Settle every job the (dead) owner held; ids settled."""
         done = []
-        for job in self.store.with_state((RUNNING, "cancelling")):
+        for job in self.store.with_state((RUNNING, CANCELLING)):
             if job.owner == owner:
-                outcome = settle(self.store, job.id, owner, self.retries, why)
-                if outcome == "cancelled":
-                    self.store.remove(job.id)
-                    self.storage.delete(job.id)
-                if outcome:
+                if settle(self.store, self.storage, job.id, owner, self.retries, why):
                     done.append(job.id)
         return done
 
@@ -134,11 +130,7 @@ class WorkerPool:
             for job in expired(self.store):
                 if job.owner in ours:
                     continue  # our own worker is alive and holds it (a late heartbeat); it renews soon
-                outcome = settle(self.store, job.id, job.owner, self.retries, "its worker stopped answering")
-                if outcome == "cancelled":
-                    self.store.remove(job.id)
-                    self.storage.delete(job.id)
-                if outcome:
+                if settle(self.store, self.storage, job.id, job.owner, self.retries, "its worker stopped answering"):
                     settled.append(job.id)
         except Exception as exc:  # keep supervising through a transient store error
             log.warning("reaper: %r", exc)

@@ -217,7 +217,7 @@ def test_a_lost_claim_discards_its_result_and_deletes_nothing(tmp_path):
                   files={"input": "input.glb"}))
     assert store.claim(job_id, "worker-a", 0.01)
     time.sleep(0.05)
-    assert settle(store, job_id, "worker-a", retries=1, why="test") == "requeued"
+    assert settle(store, storage, job_id, "worker-a", retries=1, why="test") == "requeued"
     assert _fail(store, storage, job_id, "worker-a", "late failure") == "lost"
     with pytest.raises(Exception) as exc:
         ProgressRecorder(store, job_id, interval=0, owner="worker-a")("convert", 0.5)
