@@ -20,11 +20,12 @@ import numpy as np
 
 from converter.animation import FaceAnimation
 from converter.errors import InputError
-from converter.extract import cull, fit_camera
+from converter.extract import FRAME_BLOCK, cull, fit_camera
 from converter.options import ConversionOptions, Report
 
 MOTION_COMPONENTS = 6  # principal components of each vertex's displacement carried as attributes
 MOTION_WEIGHT = 4.0  # attribute weight: how much a motion mismatch costs against geometric error
+MOTION_FRAMES = 512  # frames the motion attributes read at most: memory and the (3T)^2 eigenproblem stay bounded
 
 _P = ctypes.POINTER
 
@@ -48,28 +49,34 @@ def _simplify_with_attributes():
 def rigid_residual(frames: np.ndarray, rounds: int = 3) -> np.ndarray:
     """(T, V, 3): each frame rigidly aligned (Kabsch) onto the first, minus the first: the deformation only.
 
-    The fit is repeated on the half of the vertices that deform least, so a jaw opening does not tilt it."""
-    x = frames.astype(np.float64)
-    t, v, _ = x.shape
-    weight = np.ones((t, v))
-    for _ in range(rounds):
-        wsum = weight.sum(axis=1, keepdims=True)[..., None]
-        c_ref = (weight[..., None] * x[0][None]).sum(axis=1, keepdims=True) / wsum
-        c_fr = (weight[..., None] * x).sum(axis=1, keepdims=True) / wsum
-        h = np.einsum("tv,tvi,tvj->tij", weight, x - c_fr, x[0][None] - c_ref)
-        u, _, vt = np.linalg.svd(h)
-        fix = np.ones((t, 3))
-        fix[:, 2] = np.sign(np.linalg.det(u @ vt))
-        rot = np.einsum("tij,tj,tjk->tik", u, fix, vt)  # maps centred frame points onto the reference
-        residual = np.einsum("tvi,tik->tvk", x - c_fr, rot) + c_ref - x[0][None]
-        r = np.linalg.norm(residual, axis=-1)
-        weight = (r <= np.median(r, axis=1, keepdims=True)).astype(np.float64)
-    return residual
+    The fit is repeated on the half of the vertices that deform least, so a jaw opening does not tilt it.
+    Every frame is fitted on its own, so the work goes in blocks of frames (float64 temporaries per block)."""
+    ref = np.asarray(frames[0], np.float64)
+    out = np.empty(frames.shape, np.float64)
+    for s in range(0, len(frames), FRAME_BLOCK):
+        x = np.asarray(frames[s:s + FRAME_BLOCK], np.float64)
+        weight = np.ones(x.shape[:2])
+        for _ in range(rounds):
+            wsum = weight.sum(axis=1, keepdims=True)[..., None]
+            c_ref = (weight[..., None] * ref[None]).sum(axis=1, keepdims=True) / wsum
+            c_fr = (weight[..., None] * x).sum(axis=1, keepdims=True) / wsum
+            h = np.einsum("tv,tvi,tvj->tij", weight, x - c_fr, ref[None] - c_ref)
+            u, _, vt = np.linalg.svd(h)
+            fix = np.ones((len(x), 3))
+            fix[:, 2] = np.sign(np.linalg.det(u @ vt))
+            rot = np.einsum("tij,tj,tjk->tik", u, fix, vt)  # maps centred frame points onto the reference
+            residual = np.einsum("tvi,tik->tvk", x - c_fr, rot) + c_ref - ref[None]
+            r = np.linalg.norm(residual, axis=-1)
+            weight = (r <= np.median(r, axis=1, keepdims=True)).astype(np.float64)
+        out[s:s + FRAME_BLOCK] = residual
+    return out
 
 
 def motion_attributes(frames: np.ndarray, components: int = MOTION_COMPONENTS) -> np.ndarray:
     """(V, components) float32: each vertex's deformation over the animation (head motion removed), projected
     on the main deformations, in units of the mesh's bounding-box diagonal."""
+    if len(frames) > MOTION_FRAMES:  # the main deformations of a long capture show in evenly spaced frames
+        frames = frames[np.unique(np.linspace(0, len(frames) - 1, MOTION_FRAMES).round().astype(np.int64))]
     t, v, _ = frames.shape
     d = rigid_residual(frames)
     m = d.transpose(1, 0, 2).reshape(v, 3 * t)  # one row per vertex: its whole trajectory
@@ -118,8 +125,11 @@ def _allocate(fn, positions: np.ndarray, attrs: np.ndarray, lock: np.ndarray, fa
 def front_facing_any(anim: FaceAnimation, options: ConversionOptions) -> np.ndarray:
     """Bool (F,): triangles front-facing and in view in at least one frame for the options' camera."""
     cam = fit_camera(anim, options.size, options.yaw, options.pitch, options.fov, options.ortho, options.frame_on)
-    xy, z, w = cam.project(anim.frames)
-    return cull(xy, z, w, anim.faces, cam.width, cam.height).any(axis=0)
+    seen = np.zeros(anim.n_faces, bool)
+    for s in range(0, anim.n_frames, FRAME_BLOCK):
+        xy, z, w = cam.project(anim.frames[s:s + FRAME_BLOCK])
+        seen |= cull(xy, z, w, anim.faces, cam.width, cam.height).any(axis=0)
+    return seen
 
 
 PER_VERTEX_EXTRAS = ("node_of_vertex", "joint_of_vertex", "framed_vertices")  # what framing reads, per vertex
@@ -190,22 +200,15 @@ def budget_deviation_px(original: FaceAnimation, simplified: FaceAnimation, face
 
     cam = fit_camera(simplified, options.size, options.yaw, options.pitch, options.fov, options.ortho,
                      options.frame_on)
-    xy0, z0, w0 = cam.project(original.frames)
-    visible = cull(xy0, z0, w0, faces, cam.width, cam.height)  # (T, F) original triangles shown
     sf, sp = simplified.faces, simplified.part_ids
     rest = simplified.frames[0].astype(np.float64)
-    xy1, _, _ = cam.project(simplified.frames)
-    worst, total, count, per_part = 0.0, 0.0, 0, {}
+    attached = []  # per part: its triangles, their vertices, and where each vertex hangs on the simplified mesh
     for p in np.unique(part_ids):
         tri_ids = np.flatnonzero(sp == p)
         if not len(tri_ids):
             continue
         of = faces[part_ids == p]
-        verts = np.unique(of)
-        shown = np.zeros((original.n_frames, original.n_vertices), bool)
-        vis_p = visible[:, part_ids == p]
-        for c in range(3):  # a vertex counts at a frame when one of its triangles is shown
-            np.logical_or.at(shown.T, of[:, c], vis_p.T)
+        verts, local = np.unique(of, return_inverse=True)
         pts = original.frames[0][verts].astype(np.float64)
         tris = rest[sf[tri_ids]]
         k = min(12, len(tri_ids))
@@ -217,12 +220,23 @@ def budget_deviation_px(original: FaceAnimation, simplified: FaceAnimation, face
         best = cand[np.arange(len(pts)), np.argmin(dist, axis=1)]
         nearest = cp.reshape(len(pts), k, 3)[np.arange(len(pts)), np.argmin(dist, axis=1)]
         bary = points_to_barycentric(tris[best], nearest)
-        corner = sf[tri_ids[best]]  # (n, 3) simplified vertex ids
-        follow = np.einsum("nc,tncd->tnd", bary, xy1[:, corner])  # (T, n, 2)
-        dev = np.linalg.norm(follow - xy0[:, verts], axis=-1)
-        dev = np.where(shown[:, verts], dev, 0.0)
-        per_part[int(p)] = float(dev.max()) if dev.size else 0.0
-        worst = max(worst, per_part[int(p)])
-        total += float(dev.sum())
-        count += int(shown[:, verts].sum())
+        attached.append((int(p), part_ids == p, local.reshape(-1, 3), verts, sf[tri_ids[best]], bary))
+    worst, total, count = 0.0, 0.0, 0
+    per_part = {p: 0.0 for p, *_ in attached}
+    for s in range(0, original.n_frames, FRAME_BLOCK):  # float64 projections per block of frames, not per clip
+        xy0, z0, w0 = cam.project(original.frames[s:s + FRAME_BLOCK])
+        visible = cull(xy0, z0, w0, faces, cam.width, cam.height)  # (B, F) original triangles shown
+        xy1, _, _ = cam.project(simplified.frames[s:s + FRAME_BLOCK])
+        for p, in_part, local_faces, verts, corner, bary in attached:
+            shown = np.zeros((len(xy0), len(verts)), bool)
+            vis_p = visible[:, in_part]
+            for c in range(3):  # a vertex counts at a frame when one of its triangles is shown
+                np.logical_or.at(shown.T, local_faces[:, c], vis_p.T)
+            follow = np.einsum("nc,tncd->tnd", bary, xy1[:, corner])  # (B, n, 2)
+            dev = np.where(shown, np.linalg.norm(follow - xy0[:, verts], axis=-1), 0.0)
+            if dev.size:
+                per_part[p] = max(per_part[p], float(dev.max()))
+            total += float(dev.sum())
+            count += int(shown.sum())
+    worst = max(per_part.values(), default=0.0)
     return worst, total / max(count, 1), per_part

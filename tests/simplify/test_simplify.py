@@ -72,3 +72,37 @@ def test_converted_budget_output_verifies(face):
 def test_too_small_budget_is_refused(face):
     with pytest.raises(InputError, match="at least 4"):
         simplify.simplify(face, 2, Report())
+
+
+def _long_deforming_grid(n_frames: int) -> np.ndarray:
+    """(T, V, 3): a 12x12 grid turning about y while its upper half bulges and sways (two deformations)."""
+    g = np.stack(np.meshgrid(np.linspace(-1, 1, 12), np.linspace(-1, 1, 12)), -1).reshape(-1, 2)
+    rest = np.column_stack([g, np.zeros(len(g))])
+    t = np.arange(n_frames)[:, None]
+    upper = (g[:, 1] > 0).astype(float)[None]
+    out = np.repeat(rest[None], n_frames, axis=0)
+    out[..., 2] += 0.3 * upper * np.sin(t / 17.0)  # bulge
+    out[..., 0] += 0.1 * upper * g[None, :, 1] * np.cos(t / 29.0)  # sway
+    a = 0.4 * np.sin(t[:, 0] / 50.0)
+    rot = np.zeros((n_frames, 3, 3))
+    rot[:, 0, 0] = rot[:, 2, 2] = np.cos(a)
+    rot[:, 0, 2], rot[:, 2, 0], rot[:, 1, 1] = np.sin(a), -np.sin(a), 1.0
+    return np.einsum("tij,tvj->tvi", rot, out).astype(np.float32)
+
+
+def test_rigid_residual_in_frame_blocks_equals_each_frame_fitted_alone():
+    frames = _long_deforming_grid(3 * simplify.FRAME_BLOCK + 5)
+    blocked = simplify.rigid_residual(frames)
+    for k in (1, simplify.FRAME_BLOCK, len(frames) - 1):
+        alone = simplify.rigid_residual(frames[[0, k]])[1]
+        np.testing.assert_allclose(blocked[k], alone, atol=1e-9)
+
+
+def test_long_clips_read_motion_from_evenly_spaced_frames(monkeypatch):
+    monkeypatch.setattr(simplify, "MOTION_FRAMES", 64)  # the default (512) works the same, only slower to test
+    frames = _long_deforming_grid(400)
+    sampled = np.linalg.norm(simplify.motion_attributes(frames), axis=1)
+    monkeypatch.setattr(simplify, "MOTION_FRAMES", len(frames))
+    every = np.linalg.norm(simplify.motion_attributes(frames), axis=1)
+    np.testing.assert_allclose(sampled, every, rtol=0.05, atol=0.02 * every.max())
+    assert every.max() > 0.01  # the grid deforms: the comparison is not of zeros
