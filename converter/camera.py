@@ -9,6 +9,8 @@ import numpy as np
 
 from converter.errors import InputError
 
+FIT_CHUNK = 1 << 20  # points per chunk when fitting a camera to every vertex of every frame
+
 
 class Camera(NamedTuple):
     """Right-handed, y up, looking down -z; clip space [-1, 1]^3; viewport in pixels, y down in images."""
@@ -34,24 +36,31 @@ class Camera(NamedTuple):
             raise InputError(f"size must be between 16 and 8192 pixels, got {size}.")
         if not (1.0 <= fov <= 150.0):
             raise InputError(f"fov must be between 1 and 150 degrees, got {fov}.")
-        pts = np.asarray(frames, np.float64).reshape(-1, 3)
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        pts = np.asarray(frames).reshape(-1, 3)
+
+        def chunks():  # float64 copies one chunk at a time: a long clip has millions of points
+            return (np.asarray(pts[s:s + FIT_CHUNK], np.float64) for s in range(0, len(pts), FIT_CHUNK))
+
+        lo = np.min([c.min(axis=0) for c in chunks()], axis=0)
+        hi = np.max([c.max(axis=0) for c in chunks()], axis=0)
         center = (lo + hi) / 2
         radius = float(np.linalg.norm(hi - lo) / 2) or 1.0
         y, p = math.radians(yaw), math.radians(pitch)
         direction = np.array([math.sin(y) * math.cos(p), math.sin(p), math.cos(y) * math.cos(p)])
         distance = radius / math.sin(math.radians(fov) / 2) * 1.05
         view = look_at(center + direction * distance, center, np.array([0.0, 1.0, 0.0]))
-        eye = pts @ view[:3, :3].T + view[:3, 3]
-        depth = -eye[:, 2]
-        near = max(float(depth.min()) * 0.5, 1e-4 * distance)
-        far = float(depth.max()) * 1.5 + 1e-6
-        if ortho:
-            xs, ys = eye[:, 0], eye[:, 1]
-        else:
-            xs, ys = eye[:, 0] / depth, eye[:, 1] / depth
-        cx, cy = (xs.min() + xs.max()) / 2, (ys.min() + ys.max()) / 2
-        half = max(xs.max() - xs.min(), ys.max() - ys.min()) / 2 * (1 + 2 * margin) or 1.0
+        ext = np.full((2, 3), np.inf)  # row 0: minima, row 1: negated maxima of (depth, x, y)
+        for c in chunks():
+            eye = c @ view[:3, :3].T + view[:3, 3]
+            depth = -eye[:, 2]
+            xs, ys = (eye[:, 0], eye[:, 1]) if ortho else (eye[:, 0] / depth, eye[:, 1] / depth)
+            both = np.stack([depth, xs, ys])
+            ext = np.minimum(ext, np.stack([both.min(axis=1), -both.max(axis=1)]))
+        (d_lo, x_lo, y_lo), (d_hi, x_hi, y_hi) = ext[0], -ext[1]
+        near = max(float(d_lo) * 0.5, 1e-4 * distance)
+        far = float(d_hi) * 1.5 + 1e-6
+        cx, cy = (x_lo + x_hi) / 2, (y_lo + y_hi) / 2
+        half = max(x_hi - x_lo, y_hi - y_lo) / 2 * (1 + 2 * margin) or 1.0
         if ortho:
             proj = orthographic(cx - half, cx + half, cy - half, cy + half, near, far)
         else:

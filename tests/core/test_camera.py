@@ -96,3 +96,19 @@ def test_extract_occlusion_keeps_only_seen_triangles(cube):
     assert sheet.info["triangles_never_visible"] == 22
     no_occ = extract(anim, cam, occlusion=False)
     assert no_occ.kept[12:].sum() == 2
+
+
+def test_fit_in_chunks_frames_exactly_as_in_one_piece(monkeypatch):
+    import converter.camera as camera_module
+
+    rng = np.random.default_rng(3)
+    frames = (rng.normal(size=(9, 1001, 3)) * [1.0, 2.0, 0.5] + [0.0, 0.0, 3.0]).astype(np.float32)
+    for ortho in (False, True):
+        whole = Camera.fit(frames, yaw=15, pitch=5, ortho=ortho)
+        monkeypatch.setattr(camera_module, "FIT_CHUNK", 977)  # chunks that split frames unevenly
+        chunked = Camera.fit(frames, yaw=15, pitch=5, ortho=ortho)
+        monkeypatch.setattr(camera_module, "FIT_CHUNK", 1 << 20)
+        np.testing.assert_array_equal(whole.view, chunked.view)
+        np.testing.assert_array_equal(whole.projection, chunked.projection)
+        xy, _, _ = whole.project(frames.reshape(-1, 3))
+        assert xy.min() >= 0 and xy.max() <= whole.width  # every vertex of every frame is in view
