@@ -107,14 +107,22 @@
         h.colorTracks !== (gouraud ? h.vertices : h.paths)) {
       throw new Corrupt("the data block's header holds impossible counts");
     }
-    // Sections are 4-byte aligned in the payload; the payload starts at byte 64 of an aligned buffer.
-    const buf = new ArrayBuffer(payload.length + 4);
-    new Uint8Array(buf).set(payload);
+    // Each section holds its elements' bytes as planes (all first bytes, then all second bytes, ...),
+    // padded to 4 bytes; reassembled little-endian here.
     let pos = 0;
     function take(Type, n) {
-      const bytes = Type.BYTES_PER_ELEMENT * n;
+      const width = Type.BYTES_PER_ELEMENT;
+      const bytes = width * n;
       if (pos + bytes > payload.length) throw new Corrupt("the data block ends early");
-      const arr = new Type(buf, pos, n);
+      const arr = new Type(n);
+      const b = payload.subarray(pos, pos + bytes);
+      if (width === 1) {
+        arr.set(b);
+      } else if (width === 2) {
+        for (let i = 0; i < n; i++) arr[i] = b[i] | (b[n + i] << 8); // Int16Array wraps the sign itself
+      } else {
+        for (let i = 0; i < n; i++) arr[i] = b[i] | (b[n + i] << 8) | (b[2 * n + i] << 16) | (b[3 * n + i] << 24);
+      }
       pos += bytes + ((4 - (bytes % 4)) % 4);
       return arr;
     }

@@ -16,8 +16,8 @@ Frame k shows at t = k / fps; between frames the player interpolates linearly, a
 of every track sits at frame T, the loop end. Rigid group transforms are not used (every vertex is keyed).
 
 Binary block (little-endian), deflated (zlib, level 9) and base64 in the HTML:
-header (HEADER) then sections in SECTIONS order, each padded to 4 bytes; key frames and values are stored
-per track as the first absolute and then deltas (values of colours as 8-bit deltas modulo 256).
+header (HEADER) then the sections in ``encode``'s order, each as byte planes (_section) padded to 4 bytes; key
+frames and values are stored per track as the first absolute and then deltas (colours: 8-bit deltas modulo 256).
 """
 
 from __future__ import annotations
@@ -151,8 +151,11 @@ def _changes(active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return active[0].astype(np.uint8), np.bincount(pk, minlength=active.shape[1]), fd
 
 
-def _pad(b: bytes) -> bytes:
-    return b + b"\0" * (-len(b) % 4)
+def _section(a: np.ndarray) -> bytes:
+    """An array's bytes as byte planes (every element's first byte, then every second byte, ...: small deltas
+    leave whole planes nearly constant, which deflate packs tighter), padded to 4 bytes."""
+    planes = np.ascontiguousarray(a).view(np.uint8).reshape(len(a), a.dtype.itemsize).T.tobytes()
+    return planes + b"\0" * (-len(planes) % 4)
 
 
 def encode(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
@@ -187,7 +190,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
         pc.astype("<u2"), pf.astype("<u2"), pv.astype("<i4" if wide else "<i2"),
         cc.astype("<u2"), cf.astype("<u2"), (cv & 255).astype("u1"),
     ]
-    payload = b"".join(_pad(s.tobytes()) for s in sections)
+    payload = b"".join(_section(np.ascontiguousarray(s).ravel()) for s in sections)
     flags = (FLAG_GOURAUD if gouraud else 0) | (FLAG_WIDE if wide else 0)
     head = HEADER.pack(MAGIC, VERSION, flags, t, float(sheet.fps), sheet.camera.width, sheet.camera.height,
                        budget.scale, n_v, p, len(pf), len(cc), len(cf), len(vf), len(payload),
@@ -306,10 +309,13 @@ def _inflate(packed: bytes, limit: int) -> bytes:
 
 
 def _take(buf: memoryview, pos: int, dtype: str, n: int) -> tuple[np.ndarray, int]:
-    size = np.dtype(dtype).itemsize * n
+    """n elements of a byte-planar section at pos, and the next section's position."""
+    width = np.dtype(dtype).itemsize
+    size = width * n
     if pos + size > len(buf):
         raise InputError("the player's data block ends early; the file is corrupt.")
-    return np.frombuffer(buf, dtype, n, pos).astype(np.int64), pos + size + (-size % 4)
+    planes = np.frombuffer(buf, np.uint8, size, pos).reshape(width, n)
+    return np.ascontiguousarray(planes.T).view(dtype).ravel().astype(np.int64), pos + size + (-size % 4)
 
 
 def _unpack_keys(counts: np.ndarray, fd: np.ndarray, vd: np.ndarray, t: int, modulo: int = 0):

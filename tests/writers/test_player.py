@@ -118,9 +118,10 @@ def test_verify_reads_the_player_and_catches_wrong_data(case):
     anim, sheet, options, data, report = case
     v = verify_animation(data, anim)
     assert v.ok and v.paths == report.counts["paths"] and v.frames == 24
-    moved = _tampered(data, "pos_values", np.array([200 * 12, 0], "<i2").tobytes())  # one vertex 200 px away
-    bad = verify_animation(moved, anim)
-    assert not bad.ok and bad.max_px > 100
+    block = _block(data)
+    low = block[_section_offsets(block)["pos_values"]]  # low byte of the first vertex's x: +-128 units, 10.7 px
+    bad = verify_animation(_tampered(data, "pos_values", bytes([low ^ 0x80])), anim)
+    assert not bad.ok and bad.max_px > 5
     hidden = _tampered(data, "vis0", b"\x00" * 8)  # the first paths hidden where they show
     assert verify_animation(hidden, anim).visibility_mismatches > 0
     with pytest.raises(InputError, match="CRC-32"):
