@@ -10,7 +10,7 @@
   const MAX_EXPANDED = 1 << 27;
   const GOURAUD = 1;
   const WIDE = 2;
-  const STROKE_PX = 0.5; // canvas 2D: the SVG's seam stroke
+  const STROKE_PX = 0.5; // the SVG's seam stroke (svg_anim.STROKE_PX)
 
   const $ = (id) => document.getElementById(id);
   const root = $("facesvg-player");
@@ -303,6 +303,35 @@
     };
   }
 
+  // WebGL draws no strokes: each triangle grows by the SVG's half stroke width instead (every edge moved out by
+  // STROKE_PX / 2, a corner along its bisector, at most twice that), so silhouettes and thin triangles match the
+  // SVG's (the canvas 2D renderer strokes like the SVG). Degenerate triangles are left as they are.
+  const HALF = STROKE_PX / 2;
+  function grow(pos, k) {
+    const o = 2 * k;
+    const ax = pos[o], ay = pos[o + 1], bx = pos[o + 2], by = pos[o + 3], cx = pos[o + 4], cy = pos[o + 5];
+    // Unit edge directions a->b, b->c, c->a.
+    let ex = bx - ax, ey = by - ay, fx = cx - bx, fy = cy - by, gx = ax - cx, gy = ay - cy;
+    const le = Math.sqrt(ex * ex + ey * ey), lf = Math.sqrt(fx * fx + fy * fy), lg = Math.sqrt(gx * gx + gy * gy);
+    if (!(le > 1e-9 && lf > 1e-9 && lg > 1e-9)) return;
+    ex /= le; ey /= le; fx /= lf; fy /= lf; gx /= lg; gy /= lg;
+    // At corner a the edges leave along e and -g: the outward bisector is -(e - g).
+    if (!shift(pos, o, ex, ey, -gx, -gy) || !shift(pos, o + 2, fx, fy, -ex, -ey) ||
+        !shift(pos, o + 4, gx, gy, -fx, -fy)) {
+      pos[o] = ax; pos[o + 1] = ay; pos[o + 2] = bx; pos[o + 3] = by; pos[o + 4] = cx; pos[o + 5] = cy;
+    }
+  }
+  function shift(pos, i, ux, uy, wx, wy) {
+    const sx = ux + wx, sy = uy + wy;
+    const ls = Math.sqrt(sx * sx + sy * sy);
+    const sinHalf = Math.sqrt(Math.max(0, (1 - (ux * wx + uy * wy)) / 2));
+    if (!(ls > 1e-9 && sinHalf > 1e-9)) return false;
+    const d = Math.min(HALF / sinHalf, 2 * HALF) / ls;
+    pos[i] -= sx * d;
+    pos[i + 1] -= sy * d;
+    return true;
+  }
+
   function start(anim) {
     const { h, gouraud, pathVertices, xy, rgb, shown } = anim;
     const p = h.paths;
@@ -354,6 +383,7 @@
           col[4 * n + 3] = 255;
           n++;
         }
+        if (renderer.name === "webgl") grow(pos, n - 3);
       }
       renderer.draw(pos, col, n);
       drawnTime = t;

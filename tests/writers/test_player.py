@@ -27,10 +27,10 @@ from web.conftest import SMALL, glb_bytes, make_app, wait_job
 
 SIZE = 128
 TIMES = (0.0, 0.37, 0.55, 0.79)  # seconds: on and between frames of the 24 at 30 fps
-# SSIM to the SVG at 128 px, measured: WebGL 0.937-0.947 (no seam stroke: the SVG's 0.5 px stroke widens the
-# silhouette and thin triangles; multisampling instead of analytic anti-aliasing), canvas 2D (which strokes like
-# the SVG) 0.988-0.996. At 256 px WebGL measured 0.964-0.967.
-SSIM_MIN = {"webgl": 0.92, "canvas2d": 0.97}
+# SSIM to the SVG at 128 px, measured: WebGL 0.960-0.965 (it grows triangles by the SVG's half stroke; what is
+# left is multisampling against analytic anti-aliasing; 0.976 at 256 px), canvas 2D (which strokes like the SVG)
+# 0.988-0.996.
+SSIM_MIN = {"webgl": 0.94, "canvas2d": 0.97}
 
 
 @pytest.fixture(scope="module")
