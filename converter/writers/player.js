@@ -65,7 +65,7 @@
       throw new Corrupt("this browser cannot unpack the animation (it has no DecompressionStream); " +
         "open the file in a current Chrome, Edge, Firefox or Safari");
     }
-    const out = new Uint8Array(expected);
+    const chunks = []; // kept as they arrive: a wrong stated length allocates nothing up front
     let filled = 0;
     const reader = new Blob([bytes]).stream().pipeThrough(new DecompressionStream("deflate")).getReader();
     try {
@@ -73,7 +73,7 @@
         const { done, value } = await reader.read();
         if (done) break;
         if (filled + value.length > expected) throw new Corrupt("the data block is longer than stated");
-        out.set(value, filled);
+        chunks.push(value);
         filled += value.length;
       }
     } catch (e) {
@@ -82,6 +82,12 @@
       throw new Corrupt("the data block does not unpack (it is truncated or damaged)");
     }
     if (filled !== expected) throw new Corrupt("the data block is shorter than stated");
+    const out = new Uint8Array(expected);
+    let at = 0;
+    for (const c of chunks) {
+      out.set(c, at);
+      at += c.length;
+    }
     return out;
   }
 
@@ -103,7 +109,7 @@
     if (crc32(payload) !== h.crc) throw new Corrupt("the data block fails its CRC-32 check");
     const gouraud = (h.flags & GOURAUD) !== 0;
     if (!(h.frames > 0 && h.frames <= MAX_FRAMES && h.fps > 0 && h.scale >= 1 && h.width > 0 && h.height > 0) ||
-        (h.frames + 1) * Math.max(h.vertices, h.colorTracks) * 3 > MAX_EXPANDED ||
+        (h.frames + 1) * Math.max(h.vertices, h.colorTracks, h.paths) * 3 > MAX_EXPANDED ||
         h.colorTracks !== (gouraud ? h.vertices : h.paths)) {
       throw new Corrupt("the data block's header holds impossible counts");
     }

@@ -248,7 +248,7 @@ def write(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
 
 
 STYLE = """
-html{color-scheme:light dark}body{margin:0;font:14px/1.4 system-ui,sans-serif}
+[hidden]{display:none!important}html{color-scheme:light dark}body{margin:0;font:14px/1.4 system-ui,sans-serif}
 #facesvg-player{display:inline-flex;flex-direction:column;gap:6px;padding:8px;max-width:100%;box-sizing:border-box}
 #facesvg-canvas{display:block;max-width:100%;height:auto;cursor:pointer}
 #facesvg-message{margin:0;padding:8px;border:1px solid #b00;color:#b00;background:#fff0f0}
@@ -378,7 +378,7 @@ def decode(data: bytes) -> Decoded:
     payload = block[HEADER.size:]
     if size != len(payload) or zlib.crc32(payload) != crc:
         raise InputError("the player's data block fails its length or CRC-32 check; the file is corrupt.")
-    if not 0 < t <= MAX_FRAMES or not fps > 0 or scale < 1 or (t + 1) * max(n_v, n_ct) * 3 > MAX_EXPANDED:
+    if not 0 < t <= MAX_FRAMES or not fps > 0 or scale < 1 or (t + 1) * max(n_v, n_ct, p) * 3 > MAX_EXPANDED:
         raise InputError("the player's header holds impossible counts; the file is corrupt.")
     gouraud, wide = bool(flags & FLAG_GOURAUD), bool(flags & FLAG_WIDE)
     buf = memoryview(payload)

@@ -235,7 +235,7 @@ def test_reduced_motion_starts_paused_and_play_toggles(browser, case):
 
 
 @pytest.mark.browser
-@pytest.mark.parametrize("damage", ["truncated", "bitflip", "crc"])
+@pytest.mark.parametrize("damage", ["truncated", "bitflip", "crc", "stated length"])
 def test_a_damaged_block_shows_a_message(browser, case, damage):
     data = case[3]
     if damage == "truncated":
@@ -247,8 +247,10 @@ def test_a_damaged_block_shows_a_message(browser, case, damage):
         flipped[len(flipped) // 2] ^= 0x5A
         bad = re.sub(rb'(data-bytes="\d+">)[^<]*<', lambda m: m.group(1) + base64.b64encode(bytes(flipped)) + b"<",
                      data)
-    else:
+    elif damage == "crc":
         bad = _tampered(data, "pos_values", b"\x01\x02", fix_crc=False)
+    else:  # a stated length far beyond the block: refused when the stream ends, nothing allocated for it
+        bad = re.sub(rb'data-bytes="(\d+)"', lambda m: b'data-bytes="' + m.group(1) + b'000"', data, count=1)
     ctx = browser.new_context()
     page = ctx.new_page()
     try:
@@ -256,6 +258,6 @@ def test_a_damaged_block_shows_a_message(browser, case, damage):
         page.wait_for_selector("#facesvg-message:not([hidden])", timeout=15_000)
         text = page.inner_text("#facesvg-message")
         assert text.startswith("This animation cannot be played") and "Regenerate" in text, text
-        assert page.evaluate("() => facesvgPlayer.state") == "error"
+        assert page.evaluate("() => facesvgPlayer.state") == "error" and page.is_hidden("#facesvg-canvas")
     finally:
         ctx.close()
