@@ -10,6 +10,7 @@
   const MAX_EXPANDED = 1 << 27;
   const GOURAUD = 1;
   const WIDE = 2;
+  const HEAD = 4;
   const STROKE_PX = 0.5; // the SVG's seam stroke (svg_anim.STROKE_PX)
 
   const $ = (id) => document.getElementById(id);
@@ -122,7 +123,11 @@
       if (pos + bytes > payload.length) throw new Corrupt("the data block ends early");
       const arr = new Type(n);
       const b = payload.subarray(pos, pos + bytes);
-      if (width === 1) {
+      if (Type === Float32Array) {
+        const bits = new Uint32Array(n);
+        for (let i = 0; i < n; i++) bits[i] = b[i] | (b[n + i] << 8) | (b[2 * n + i] << 16) | (b[3 * n + i] << 24);
+        arr.set(new Float32Array(bits.buffer));
+      } else if (width === 1) {
         arr.set(b);
       } else if (width === 2) {
         for (let i = 0; i < n; i++) arr[i] = b[i] | (b[n + i] << 8); // Int16Array wraps the sign itself
@@ -140,6 +145,7 @@
       posValues: take(h.flags & WIDE ? Int32Array : Int16Array, 2 * h.posKeys),
       colorCounts: take(Uint16Array, h.colorTracks), colorFrames: take(Uint16Array, h.colorKeys),
       colorValues: take(Uint8Array, 3 * h.colorKeys),
+      head: h.flags & HEAD ? take(Float32Array, 6 * (h.frames + 1)) : null,
     };
     if (pos !== payload.length) throw new Corrupt("the data block's sections do not fill it");
     for (let i = 0; i < s.pathVertices.length; i++) {
@@ -222,10 +228,22 @@
   function decode(block) {
     const { h, s, gouraud } = parse(block);
     const frames1 = h.frames + 1;
+    const xy = expand(s.posCounts, s.posFrames, s.posValues, 2, frames1, h.scale, 0, Float32Array);
+    if (s.head) { // positions are local to the head transform: to px, once
+      const nv = h.vertices;
+      for (let f = 0; f < frames1; f++) {
+        const m = s.head.subarray(6 * f, 6 * f + 6);
+        for (let i = 2 * f * nv, end = 2 * (f + 1) * nv; i < end; i += 2) {
+          const x = xy[i], y = xy[i + 1];
+          xy[i] = m[0] * x + m[1] * y + m[2];
+          xy[i + 1] = m[3] * x + m[4] * y + m[5];
+        }
+      }
+    }
     return {
       h, gouraud,
       pathVertices: s.pathVertices,
-      xy: expand(s.posCounts, s.posFrames, s.posValues, 2, frames1, h.scale, 0, Float32Array),
+      xy,
       rgb: expand(s.colorCounts, s.colorFrames, s.colorValues, 3, frames1, 1, 256, Uint8ClampedArray),
       shown: visibility(h, s),
     };
@@ -453,6 +471,7 @@
       seek(t) { setPlaying(false); seek(t); },
       play() { setPlaying(true); },
       pause() { setPlaying(false); },
+      positions(f) { return Array.from(xy.subarray(2 * nv * f, 2 * nv * (f + 1))); }, // frame f's px (tests)
     });
     Object.defineProperties(api, { // live values (Object.assign would copy a getter's value once)
       time: { get: () => time, enumerable: true },

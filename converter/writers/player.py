@@ -6,14 +6,16 @@ compact binary block and plays it with a small script (converter/writers/player.
 
 - per vertex one keyframed 2D track (converter.encode.freeknots, Euclidean bound per point), its keys on the
   integer grid of ErrorBudget.scale, so rounding is part of options.tolerance as in the SVG; keys sit on
-  integer frames, so there are no keyTimes to round;
+  integer frames, so there are no keyTimes to round; with options.rigid, when it saves keys, the tracks are
+  local to one head transform (the largest part's affine map per frame, stored every frame as float32 and
+  applied once when the player expands the keys), their radius divided by its largest magnification;
 - per path (the SVG's drawing order, converter.encode.order.draw_list) its triangle's vertices and its
   visibility as change frames;
 - colours keyed like the SVG's (svg_anim.color_keys within svg_anim.COLOR_TOLERANCE levels): per path for
   flat shading, per vertex for Gouraud (WebGL interpolates vertex colours linearly: exact Gouraud).
 
 Frame k shows at t = k / fps; between frames the player interpolates linearly, as SMIL does; the last key
-of every track sits at frame T, the loop end. Rigid group transforms are not used (every vertex is keyed).
+of every track sits at frame T, the loop end. The SVG's band transforms inside the head are not used.
 
 Binary block (little-endian), deflated (zlib, level 9) and base64 in the HTML:
 header (HEADER) then the sections in ``encode``'s order, each as byte planes (_section) padded to 4 bytes; key
@@ -35,7 +37,7 @@ from importlib import resources
 import numpy as np
 from scipy import sparse
 
-from converter.encode import freeknots
+from converter.encode import freeknots, groups
 from converter.encode import keys as keyframes
 from converter.encode.budget import ErrorBudget
 from converter.encode.order import draw_list
@@ -50,6 +52,8 @@ HEADER = struct.Struct("<4sHHIdIIIIIIIIIII")  # magic, version, flags, frames, f
 # vertices, paths, position keys, colour tracks, colour keys, visibility changes, payload bytes, payload CRC-32
 FLAG_GOURAUD = 1  # colour tracks per vertex (else per path)
 FLAG_WIDE = 2  # position values are int32 (else int16)
+FLAG_HEAD = 4  # positions are local to a per-frame head transform (last section: float32 (T + 1, 2, 3))
+BYTES_PER_KEY = 2.5  # deflated bytes of a position key (capture-like), against the head transform's float32s
 MAX_FRAMES = 65534  # key frames are uint16 (frame T, the loop end, included)
 MAX_EXPANDED = 1 << 27  # numbers the player may expand (frames x tracks x coordinates) before it refuses
 DATA_ID = "facesvg-data"
@@ -151,6 +155,22 @@ def _changes(active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return active[0].astype(np.uint8), np.bincount(pk, minlength=active.shape[1]), fd
 
 
+def _head(sheet: Sheet, tris: np.ndarray, local: np.ndarray, xy: np.ndarray,
+          budget: ErrorBudget) -> tuple[np.ndarray, np.ndarray, float]:
+    """The head transform: per frame the affine map of the largest part from the neutral frame
+    (groups.fit_affine, float32 as stored; frame T repeats frame T-1), the vertices (T, V, 2) in its frame, and
+    the radius their keys may use: the map magnifies a local error by at most its largest singular value."""
+    part = sheet.part_ids[tris]
+    skin = np.unique(local[part == np.bincount(part).argmax()])
+    fit = groups.fit_affine(xy[sheet.neutral, skin], xy[:, skin])
+    mats = np.concatenate([fit, fit[-1:]]).astype(np.float32)
+    a = mats[:-1].astype(np.float64)
+    local_xy = np.einsum("tij,tvj->tvi", np.linalg.inv(a[:, :, :2]), xy - a[:, None, :, 2])
+    gain = float(np.linalg.norm(a[:, :, :2], ord=2, axis=(1, 2)).max())
+    radius = (budget.tolerance - budget.float_err) / gain - budget.rounding
+    return mats, local_xy, radius
+
+
 def _section(a: np.ndarray) -> bytes:
     """An array's bytes as byte planes (every element's first byte, then every second byte, ...: small deltas
     leave whole planes nearly constant, which deflate packs tighter), padded to 4 bytes."""
@@ -174,9 +194,20 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
     n_v = len(verts)
     vact = _vertex_active(active, local, n_v)
     budget = ErrorBudget.split(options.tolerance, max(sheet.camera.width, sheet.camera.height))
+    xy = sheet.xy[:, verts].astype(np.float64)
     # Keys sit on integer frames (nothing to round in time): the keyTimes share is the keyframes' too.
-    radius = budget.tolerance - budget.rounding - budget.float_err
-    pos = freeknots.point_keys(sheet.xy[:, verts].astype(np.float64), vact, radius)
+    pos = freeknots.point_keys(xy, vact, budget.tolerance - budget.rounding - budget.float_err)
+    mats = None
+    if options.rigid:
+        mats, local_xy, radius = _head(sheet, tris, local, xy, budget)
+        if radius > 0.1 * budget.keys:
+            head_keys = freeknots.point_keys(local_xy, vact, radius)
+            if (pos.mask.sum() - head_keys.mask.sum()) * BYTES_PER_KEY > mats.nbytes:
+                pos = head_keys
+            else:
+                mats = None
+        else:
+            mats = None
     q = pos._replace(values=np.rint(pos.values * budget.scale))
     pc, pf, pv = _pack_keys(q.mask, q.values)
     wide = bool(len(pv)) and (pv.min() < -32768 or pv.max() > 32767)
@@ -189,15 +220,16 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
         vis0.astype("u1"), vc.astype("<u2"), vf.astype("<u2"),
         pc.astype("<u2"), pf.astype("<u2"), pv.astype("<i4" if wide else "<i2"),
         cc.astype("<u2"), cf.astype("<u2"), (cv & 255).astype("u1"),
-    ]
+    ] + ([mats.reshape(-1).astype("<f4")] if mats is not None else [])
     payload = b"".join(_section(np.ascontiguousarray(s).ravel()) for s in sections)
-    flags = (FLAG_GOURAUD if gouraud else 0) | (FLAG_WIDE if wide else 0)
+    flags = (FLAG_GOURAUD if gouraud else 0) | (FLAG_WIDE if wide else 0) | (FLAG_HEAD if mats is not None else 0)
     head = HEADER.pack(MAGIC, VERSION, flags, t, float(sheet.fps), sheet.camera.width, sheet.camera.height,
                        budget.scale, n_v, p, len(pf), len(cc), len(cf), len(vf), len(payload),
                        zlib.crc32(payload))
     report.counts["paths"] = p
     report.counts["player_vertices"] = n_v
     report.counts["keys"] = int(len(pf))
+    report.counts["player_head_transform"] = int(mats is not None)
     report.counts["color_keys"] = int(len(cf))
     report.counts["visibility_changes"] = int(len(vf))
     report.counts["depth_conflicts"] = dl.conflicts
@@ -395,12 +427,22 @@ def decode(data: bytes) -> Decoded:
     cc, pos = _take(buf, pos, "<u2", n_ct)
     cf, pos = _take(buf, pos, "<u2", n_ck)
     cv, pos = _take(buf, pos, "u1", 3 * n_ck)
+    mats = None
+    if flags & FLAG_HEAD:
+        width = 6 * (t + 1)
+        if pos + 4 * width > len(payload):
+            raise InputError("the player's data block ends early; the file is corrupt.")
+        mats = np.frombuffer(payload, np.uint8, 4 * width, pos).reshape(4, width).T.copy().view("<f4")
+        mats = mats.reshape(t + 1, 2, 3).astype(np.float64)
+        pos += 4 * width
     if pos != len(payload) or n_ct != (n_v if gouraud else p):
         raise InputError("the player's sections do not fill its data block; the file is corrupt.")
     if len(local) and local.max() >= n_v:
         raise InputError("a path names a vertex the player does not store; the file is corrupt.")
     track, fk, vals = _unpack_keys(pc, pf, pv.reshape(-1, 2), t)
     xy = _expand(track, fk, vals.astype(np.float64) / scale, n_v, t + 1)
+    if mats is not None:  # local to the head transform: to px
+        xy = np.einsum("tij,tvj->tvi", mats[:, :, :2], xy) + mats[:, None, :, 2]
     ctrack, cfk, cvals = _unpack_keys(cc, cf, cv.reshape(-1, 3), t, modulo=256)
     rgb = _expand(ctrack, cfk, cvals.astype(np.float64), n_ct, t + 1)
     vtrack, vfk, _ = _unpack_keys(vc, vf, np.zeros((len(vf), 1), np.int64), t - 1)

@@ -16,6 +16,7 @@ from skimage.metrics import structural_similarity
 
 from conftest import cube_animation
 from converter import extract, formats
+from converter.animation import FaceAnimation
 from converter.cli import main
 from converter.encode.order import draw_list
 from converter.errors import InputError
@@ -213,6 +214,27 @@ def test_the_player_draws_like_the_svg_in_chromium(browser, case, artifacts):
         Image.fromarray(np.concatenate([np.concatenate(got, 1), np.concatenate(svg_rgb, 1)], 0)).save(
             artifacts / f"player_vs_svg_{renderer}.png")
         assert np.abs(got[0].astype(int) - got[-1].astype(int)).mean() > 0.5  # it moves
+
+
+@pytest.mark.browser
+@pytest.mark.parametrize("rigid", [True, False])
+def test_the_script_decodes_what_python_decodes(browser, sample_path, rigid):
+    anim = formats.load(sample_path).sliced(0, 12)
+    extent = float(np.ptp(anim.frames[0], axis=0).max())
+    sway = np.random.default_rng(1).normal(0, 0.01 * extent, (12, 1, 3)).astype(np.float32)  # a head pays
+    anim = FaceAnimation(anim.frames + sway, anim.faces, anim.part_ids, anim.parts, anim.fps, anim.name)
+    sheet = extract.extract(anim, extract.fit_camera(anim, 96), occlusion=False)
+    report = Report()
+    data = player.write(sheet, ConversionOptions(size=96, rigid=rigid, shading="gouraud"), report)
+    assert report.counts["player_head_transform"] == int(rigid)
+    d = player.decode(data)
+    ctx, page = _open(browser, data)
+    try:
+        for f in (0, 5, 12):  # 12: the loop end
+            js = np.array(page.evaluate("(f) => facesvgPlayer.positions(f)", f)).reshape(-1, 2)
+            np.testing.assert_allclose(js, d.xy[f], atol=1e-3)
+    finally:
+        ctx.close()
 
 
 @pytest.mark.browser
