@@ -156,19 +156,40 @@ def _changes(active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _head(sheet: Sheet, tris: np.ndarray, local: np.ndarray, xy: np.ndarray,
-          budget: ErrorBudget) -> tuple[np.ndarray, np.ndarray, float]:
+          budget: ErrorBudget) -> tuple[np.ndarray, np.ndarray, float] | None:
     """The head transform: per frame the affine map of the largest part from the neutral frame
     (groups.fit_affine, float32 as stored; frame T repeats frame T-1), the vertices (T, V, 2) in its frame, and
-    the radius their keys may use: the map magnifies a local error by at most its largest singular value."""
+    the radius their keys may use: the map magnifies a local error by at most its largest singular value.
+    None when a frame's map is (nearly) singular."""
     part = sheet.part_ids[tris]
     skin = np.unique(local[part == np.bincount(part).argmax()])
     fit = groups.fit_affine(xy[sheet.neutral, skin], xy[:, skin])
     mats = np.concatenate([fit, fit[-1:]]).astype(np.float32)
     a = mats[:-1].astype(np.float64)
+    det = np.linalg.det(a[:, :, :2])
+    if not (np.isfinite(a).all() and (np.abs(det) > 1e-3).all()):
+        return None
     local_xy = np.einsum("tij,tvj->tvi", np.linalg.inv(a[:, :, :2]), xy - a[:, None, :, 2])
     gain = float(np.linalg.norm(a[:, :, :2], ord=2, axis=(1, 2)).max())
     radius = (budget.tolerance - budget.float_err) / gain - budget.rounding
     return mats, local_xy, radius
+
+
+def _position_keys(sheet: Sheet, tris: np.ndarray, verts: np.ndarray, local: np.ndarray, vact: np.ndarray,
+                   budget: ErrorBudget, rigid: bool) -> tuple[keyframes.Keys, np.ndarray | None]:
+    """Per-vertex keys in px, or (with rigid) local to the head transform (_head) when that saves more key bytes
+    than the transform costs; the transforms (T + 1, 2, 3) float32 or None."""
+    xy = sheet.xy[:, verts].astype(np.float64)
+    # Keys sit on integer frames (nothing to round in time): the keyTimes share is the keyframes' too.
+    plain = freeknots.point_keys(xy, vact, budget.tolerance - budget.rounding - budget.float_err)
+    head = _head(sheet, tris, local, xy, budget) if rigid else None
+    if head is None or head[2] <= 0.1 * budget.keys:
+        return plain, None
+    mats, local_xy, radius = head
+    keys = freeknots.point_keys(local_xy, vact, radius)
+    if (plain.mask.sum() - keys.mask.sum()) * BYTES_PER_KEY <= mats.nbytes:
+        return plain, None
+    return keys, mats
 
 
 def _section(a: np.ndarray) -> bytes:
@@ -194,20 +215,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
     n_v = len(verts)
     vact = _vertex_active(active, local, n_v)
     budget = ErrorBudget.split(options.tolerance, max(sheet.camera.width, sheet.camera.height))
-    xy = sheet.xy[:, verts].astype(np.float64)
-    # Keys sit on integer frames (nothing to round in time): the keyTimes share is the keyframes' too.
-    pos = freeknots.point_keys(xy, vact, budget.tolerance - budget.rounding - budget.float_err)
-    mats = None
-    if options.rigid:
-        mats, local_xy, radius = _head(sheet, tris, local, xy, budget)
-        if radius > 0.1 * budget.keys:
-            head_keys = freeknots.point_keys(local_xy, vact, radius)
-            if (pos.mask.sum() - head_keys.mask.sum()) * BYTES_PER_KEY > mats.nbytes:
-                pos = head_keys
-            else:
-                mats = None
-        else:
-            mats = None
+    pos, mats = _position_keys(sheet, tris, verts, local, vact, budget, options.rigid)
     q = pos._replace(values=np.rint(pos.values * budget.scale))
     pc, pf, pv = _pack_keys(q.mask, q.values)
     wide = bool(len(pv)) and (pv.min() < -32768 or pv.max() > 32767)
