@@ -12,7 +12,7 @@ from typing import Any
 
 from converter.errors import InputError
 from converter.options import ConversionOptions, OptionField, Report
-from converter.writers import fap2d, svg_anim, svg_gouraud
+from converter.writers import fap2d, player, svg_anim, svg_gouraud
 
 Writer = Callable[[Any, ConversionOptions, Report], bytes]
 """(what the stage built: a Sheet or a Fat2dSheet, options, report) -> the output's bytes."""
@@ -73,12 +73,14 @@ class OutputKind:
 
 SVG_FILE = OutputFile("svg", "SVG", ".svg", "image/svg+xml")
 SVGZ_FILE = OutputFile("svgz", "SVGZ (gzip)", ".svgz", "image/svg+xml", gzip=True, attachment=True)
+PLAYER_FILE = OutputFile("html", "Player (.html)", ".html", "text/html")
 
 OUTPUTS: dict[str, OutputKind] = {k.name: k for k in (
     OutputKind("svg", "Animated SVG", svg_anim.write, (SVG_FILE, SVGZ_FILE),
                shading_writers={"flat": svg_anim.write, "gouraud": svg_gouraud.write,
                                 "gouraud-chapter": svg_gouraud.write},
                gzip_option="svgz", verify=True),
+    OutputKind("player", "WebGL player (HTML)", player.write, (PLAYER_FILE,), stills=False, verify=True),
     OutputKind("fap2d", "MPEG-4 2D face package", fap2d.write,
                (OutputFile("fap2d", "2D face package (.zip)", ".zip", "application/zip", attachment=True,
                            download_suffix=".fap2d.zip"),),

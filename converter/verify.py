@@ -1,5 +1,8 @@
 """The verifier: evaluate an animated SVG's SMIL at every frame time and compare with the exact projection.
 
+A player file (``--to player``, recognised by content) is decoded by converter.writers.player instead and
+compared the same way.
+
 It reads the SVG with lxml, takes the camera, frame rate and options from ``<metadata id="facesvg">``,
 re-loads the input (converter.formats.load plus the same 3D stages: frame range, triangle budget, ...),
 projects every frame with the metadata camera and measures, for every vertex of every path drawn at frame k
@@ -29,6 +32,7 @@ from converter.convert import load, prepare
 from converter.errors import InputError
 from converter.extract import cull
 from converter.options import ConversionOptions, Report
+from converter.writers import player
 
 SVG_NS = "{http://www.w3.org/2000/svg}"
 _TOKEN = re.compile(r"[MmLlZzHhVv]|[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
@@ -302,7 +306,10 @@ def _group_matrices(g: etree._Element, times: np.ndarray) -> np.ndarray:
 
 
 def evaluate(data: bytes) -> Evaluated:
-    """Evaluate every triangle path of a facesvg SVG at the frame times k / fps."""
+    """Evaluate every triangle path of a facesvg SVG (or player file) at the frame times k / fps."""
+    if player.is_player(data):  # the player's block decoded by its own reader
+        d = player.decode(data)
+        return Evaluated(d.meta, d.triangles, d.path_xy(), d.shown)
     root = read_svg(data)
     meta = metadata_of(root)
     try:
@@ -401,12 +408,12 @@ def verify_animation(data: bytes, anim, tolerance: float | None = None) -> Verif
 
 def verify_file(svg_path: str | Path, input_path: str | Path, cache: str | Path | None = None,
                 tolerance: float | None = None) -> Verification:
-    """Verify an SVG written by facesvg against the input it was converted from."""
+    """Verify an SVG (or player file) written by facesvg against the input it was converted from."""
     try:
         data = Path(svg_path).read_bytes()
     except OSError as exc:
         raise InputError(f"cannot read {svg_path}: {exc.strerror}.") from None
-    meta = metadata_of(read_svg(data))
+    meta = player.decode(data).meta if player.is_player(data) else metadata_of(read_svg(data))
     opts = meta.get("options", {})
     options = ConversionOptions.from_mapping({k: v for k, v in opts.items() if not isinstance(v, (dict, list))})
     anim = load(input_path, options, cache)  # with the options' --weights capture, when it was driven by one
@@ -417,7 +424,7 @@ def verify_file(svg_path: str | Path, input_path: str | Path, cache: str | Path 
 def register_cli(subparsers) -> None:
     """Add `facesvg verify OUT.svg INPUT [--cache FILE] [--tolerance PX] [--json]`."""
     p = subparsers.add_parser("verify", help="check an SVG against the exact projection of its input")
-    p.add_argument("svg", help="the SVG (or .svgz) written by facesvg convert")
+    p.add_argument("svg", help="the SVG (or .svgz, or player .html) written by facesvg convert")
     p.add_argument("input", help="the input animation it was converted from")
     p.add_argument("--cache", help="PC2 or MDD point cache for an OBJ input")
     p.add_argument("--tolerance", type=float, help="px bound to check (default: the SVG's stated tolerance)")

@@ -10,7 +10,7 @@ from webapp.eta import standing
 from webapp.jobstore import DONE, Job
 from webapp.messages import user_words
 from webapp.openapi import openapi_document
-from webapp.security import may_see
+from webapp.security import may_see, self_contained_csp
 from webapp.storage import is_job_id, result_files
 from webapp.submit import create_job, download_stem
 
@@ -175,5 +175,7 @@ def _send(job: Job, kind: str):
     if kind == "svg":  # generated SVG shown inline: no scripts, no external loads
         response.headers["Content-Security-Policy"] = ("default-src 'none'; style-src 'unsafe-inline'; img-src data:; "
                                                        "frame-ancestors 'self'")
+    elif media == "text/html":  # a generated page (the player): its own inline blocks by hash, no loads
+        response.headers["Content-Security-Policy"] = self_contained_csp(path)
     return response
 

@@ -25,17 +25,37 @@ OTHER_CSP = "default-src 'none'; frame-ancestors 'self'; base-uri 'none'"  # JSO
 INLINE = re.compile(r"<(script|style)>(.*?)</\1>", re.DOTALL)  # inline blocks without attributes
 
 
-@functools.lru_cache(maxsize=16)
-def _static_page_csp(path: str, mtime: float) -> str:
-    """The CSP of a static HTML page: same-origin loads only, its own inline blocks allowed by their hashes."""
+def _inline_hashes(path: str) -> dict[str, str]:
+    """The CSP sources ('sha256-...') of an HTML file's inline script and style blocks, by tag."""
     text = Path(path).read_text(encoding="utf-8")
-    hashes = {"script": [], "style": []}
+    hashes: dict[str, list[str]] = {"script": [], "style": []}
     for tag, body in INLINE.findall(text):
         digest = base64.b64encode(hashlib.sha256(body.encode("utf-8")).digest()).decode()
         hashes[tag].append(f"'sha256-{digest}'")
-    return (f"default-src 'self'; script-src 'self' {' '.join(hashes['script'])}; "
-            f"style-src 'self' {' '.join(hashes['style'])}; img-src 'self' data: blob:; connect-src 'self'; "
+    return {tag: " ".join(sources) for tag, sources in hashes.items()}
+
+
+@functools.lru_cache(maxsize=16)
+def _static_page_csp(path: str, mtime: float) -> str:
+    """The CSP of a static HTML page: same-origin loads only, its own inline blocks allowed by their hashes."""
+    hashes = _inline_hashes(path)
+    return (f"default-src 'self'; script-src 'self' {hashes['script']}; "
+            f"style-src 'self' {hashes['style']}; img-src 'self' data: blob:; connect-src 'self'; "
             "object-src 'none'; frame-ancestors 'self'; form-action 'none'; base-uri 'none'")
+
+
+@functools.lru_cache(maxsize=16)
+def _self_contained_csp(path: str, mtime: float) -> str:
+    """The CSP of a generated self-contained page (the player): only its own inline blocks, no loads at all."""
+    hashes = {tag: sources or "'none'" for tag, sources in _inline_hashes(path).items()}
+    return (f"default-src 'none'; script-src {hashes['script']}; style-src {hashes['style']}; "
+            "img-src data: blob:; connect-src 'none'; "
+            "object-src 'none'; frame-ancestors 'self'; form-action 'none'; base-uri 'none'")
+
+
+def self_contained_csp(path: Path) -> str:
+    """The CSP for a generated HTML result file (recomputed when the file changes)."""
+    return _self_contained_csp(str(path), path.stat().st_mtime)
 
 
 def static_page_csp(filename: str) -> str:

@@ -104,3 +104,13 @@ def test_installed_wheel_serves_the_ui_and_its_static_files(installed, tmp_path)
     finally:
         proc.terminate()
         proc.wait(30)
+
+
+def test_installed_wheel_writes_the_player(installed, tmp_path):
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    out = tmp_path / "face.html"
+    r = subprocess.run([installed / "facesvg", "convert", "--sample", "--to", "player", "-o", out, "--size", "64",
+                        "--end", "4", "-q"], capture_output=True, text=True, env=env, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    text = out.read_text(encoding="utf-8")
+    assert "window.facesvgPlayer" in text  # the package data script, inlined

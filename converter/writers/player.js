@@ -1,0 +1,505 @@
+// facesvg player: decodes the page's data block and draws the face with WebGL (canvas 2D when WebGL is missing).
+// The block's layout is documented in converter/writers/player.py. This script loads nothing and evaluates no
+// strings; a corrupt or truncated block shows a message instead of the face.
+"use strict";
+(() => {
+  const MAGIC = 0x50565346; // "FSVP" little-endian
+  const VERSION = 1;
+  const HEADER_BYTES = 64;
+  const MAX_FRAMES = 65534;
+  const MAX_EXPANDED = 1 << 27;
+  const GOURAUD = 1;
+  const WIDE = 2;
+  const HEAD = 4;
+  const STROKE_PX = 0.5; // the SVG's seam stroke (svg_anim.STROKE_PX)
+
+  const $ = (id) => document.getElementById(id);
+  const root = $("facesvg-player");
+  const canvas = $("facesvg-canvas");
+  const message = $("facesvg-message");
+  const playButton = $("facesvg-play");
+  const scrub = $("facesvg-scrub");
+  const loopBox = $("facesvg-loop");
+  const timeLabel = $("facesvg-time");
+  const api = { state: "loading", error: null, renderer: null };
+  window.facesvgPlayer = api;
+
+  class Corrupt extends Error {}
+
+  function fail(text) {
+    message.textContent = text;
+    message.hidden = false;
+    canvas.hidden = true;
+    api.state = "error";
+    api.error = text;
+    root.dataset.state = "error";
+  }
+
+  // CRC-32 (IEEE), as Python's zlib.crc32.
+  const CRC_TABLE = new Uint32Array(256);
+  for (let n = 0; n < 256; n++) {
+    let c = n;
+    for (let k = 0; k < 8; k++) c = c & 1 ? 0xedb88320 ^ (c >>> 1) : c >>> 1;
+    CRC_TABLE[n] = c >>> 0;
+  }
+  function crc32(bytes) {
+    let c = 0xffffffff;
+    for (let i = 0; i < bytes.length; i++) c = CRC_TABLE[(c ^ bytes[i]) & 255] ^ (c >>> 8);
+    return (c ^ 0xffffffff) >>> 0;
+  }
+
+  function base64Bytes(text) {
+    let bin;
+    try {
+      bin = atob(text.replace(/\s+/g, ""));
+    } catch (e) {
+      throw new Corrupt("the data block is not valid base64");
+    }
+    const out = new Uint8Array(bin.length);
+    for (let i = 0; i < bin.length; i++) out[i] = bin.charCodeAt(i);
+    return out;
+  }
+
+  // Inflate with the browser's DecompressionStream, refusing more than the stated length.
+  async function inflate(bytes, expected) {
+    if (typeof DecompressionStream !== "function") {
+      throw new Corrupt("this browser cannot unpack the animation (it has no DecompressionStream); " +
+        "open the file in a current Chrome, Edge, Firefox or Safari");
+    }
+    const chunks = []; // kept as they arrive: a wrong stated length allocates nothing up front
+    let filled = 0;
+    const reader = new Blob([bytes]).stream().pipeThrough(new DecompressionStream("deflate")).getReader();
+    try {
+      for (;;) {
+        const { done, value } = await reader.read();
+        if (done) break;
+        if (filled + value.length > expected) throw new Corrupt("the data block is longer than stated");
+        chunks.push(value);
+        filled += value.length;
+      }
+    } catch (e) {
+      reader.cancel().catch(() => {});
+      if (e instanceof Corrupt) throw e;
+      throw new Corrupt("the data block does not unpack (it is truncated or damaged)");
+    }
+    if (filled !== expected) throw new Corrupt("the data block is shorter than stated");
+    const out = new Uint8Array(expected);
+    let at = 0;
+    for (const c of chunks) {
+      out.set(c, at);
+      at += c.length;
+    }
+    return out;
+  }
+
+  // Header and sections, every length checked before anything is allocated.
+  function parse(block) {
+    if (block.length < HEADER_BYTES) throw new Corrupt("the data block is shorter than its header");
+    const dv = new DataView(block.buffer, block.byteOffset, block.byteLength);
+    const u32 = (o) => dv.getUint32(o, true);
+    if (u32(0) !== MAGIC || dv.getUint16(4, true) !== VERSION) {
+      throw new Corrupt("the data block is not a version " + VERSION + " facesvg player block");
+    }
+    const h = {
+      flags: dv.getUint16(6, true), frames: u32(8), fps: dv.getFloat64(12, true), width: u32(20),
+      height: u32(24), scale: u32(28), vertices: u32(32), paths: u32(36), posKeys: u32(40), colorTracks: u32(44),
+      colorKeys: u32(48), changes: u32(52), size: u32(56), crc: u32(60),
+    };
+    const payload = block.subarray(HEADER_BYTES);
+    if (h.size !== payload.length) throw new Corrupt("the data block's length does not match its header");
+    if (crc32(payload) !== h.crc) throw new Corrupt("the data block fails its CRC-32 check");
+    const gouraud = (h.flags & GOURAUD) !== 0;
+    if (!(h.frames > 0 && h.frames <= MAX_FRAMES && h.fps > 0 && h.scale >= 1 && h.width > 0 && h.height > 0) ||
+        (h.frames + 1) * Math.max(h.vertices, h.colorTracks, h.paths) * 3 > MAX_EXPANDED ||
+        h.colorTracks !== (gouraud ? h.vertices : h.paths)) {
+      throw new Corrupt("the data block's header holds impossible counts");
+    }
+    // Each section holds its elements' bytes as planes (all first bytes, then all second bytes, ...),
+    // padded to 4 bytes; reassembled little-endian here.
+    let pos = 0;
+    function take(Type, n) {
+      const width = Type.BYTES_PER_ELEMENT;
+      const bytes = width * n;
+      if (pos + bytes > payload.length) throw new Corrupt("the data block ends early");
+      const arr = new Type(n);
+      const b = payload.subarray(pos, pos + bytes);
+      if (Type === Float32Array) {
+        const bits = new Uint32Array(n);
+        for (let i = 0; i < n; i++) bits[i] = b[i] | (b[n + i] << 8) | (b[2 * n + i] << 16) | (b[3 * n + i] << 24);
+        arr.set(new Float32Array(bits.buffer));
+      } else if (width === 1) {
+        arr.set(b);
+      } else if (width === 2) {
+        for (let i = 0; i < n; i++) arr[i] = b[i] | (b[n + i] << 8); // Int16Array wraps the sign itself
+      } else {
+        for (let i = 0; i < n; i++) arr[i] = b[i] | (b[n + i] << 8) | (b[2 * n + i] << 16) | (b[3 * n + i] << 24);
+      }
+      pos += bytes + ((4 - (bytes % 4)) % 4);
+      return arr;
+    }
+    const s = {
+      vertexIds: take(Uint32Array, h.vertices), triangles: take(Uint32Array, h.paths),
+      pathVertices: take(Uint32Array, 3 * h.paths),
+      vis0: take(Uint8Array, h.paths), visCounts: take(Uint16Array, h.paths), visFrames: take(Uint16Array, h.changes),
+      posCounts: take(Uint16Array, h.vertices), posFrames: take(Uint16Array, h.posKeys),
+      posValues: take(h.flags & WIDE ? Int32Array : Int16Array, 2 * h.posKeys),
+      colorCounts: take(Uint16Array, h.colorTracks), colorFrames: take(Uint16Array, h.colorKeys),
+      colorValues: take(Uint8Array, 3 * h.colorKeys),
+      head: h.flags & HEAD ? take(Float32Array, 6 * (h.frames + 1)) : null,
+    };
+    if (pos !== payload.length) throw new Corrupt("the data block's sections do not fill it");
+    for (let i = 0; i < s.pathVertices.length; i++) {
+      if (s.pathVertices[i] >= h.vertices) throw new Corrupt("a triangle names a vertex the block does not hold");
+    }
+    return { h, s, gouraud };
+  }
+
+  function sum(arr) {
+    let t = 0;
+    for (let i = 0; i < arr.length; i++) t += arr[i];
+    return t;
+  }
+
+  // Keyed tracks (counts, frame deltas, value deltas) to per-frame values, frame-major: out[(f * n + track) * dims + d].
+  // Between keys the values are linear, so linear interpolation between frames afterwards is SMIL's.
+  function expand(counts, frameDeltas, valueDeltas, dims, frames1, scale, modulo, Out) {
+    const n = counts.length;
+    if (sum(counts) !== frameDeltas.length) throw new Corrupt("the key counts do not add up");
+    const out = new Out(frames1 * n * dims);
+    const prev = new Float64Array(dims);
+    const cur = new Float64Array(dims);
+    let k = 0;
+    for (let track = 0; track < n; track++) {
+      const m = counts[track];
+      let lastFrame = -1;
+      for (let j = 0; j < m; j++, k++) {
+        const frame = j === 0 ? frameDeltas[k] : lastFrame + frameDeltas[k];
+        if (frame > frames1 - 1 || (j > 0 && frame <= lastFrame)) throw new Corrupt("a key frame is out of order");
+        for (let d = 0; d < dims; d++) {
+          let v = j === 0 ? valueDeltas[k * dims + d] : prev[d] + valueDeltas[k * dims + d];
+          if (modulo) v = ((v % modulo) + modulo) % modulo;
+          cur[d] = v;
+        }
+        if (j === 0) {
+          for (let f = 0; f <= frame; f++) {
+            for (let d = 0; d < dims; d++) out[(f * n + track) * dims + d] = cur[d] / scale;
+          }
+        } else {
+          const span = frame - lastFrame;
+          for (let f = lastFrame + 1; f <= frame; f++) {
+            const w = (f - lastFrame) / span;
+            for (let d = 0; d < dims; d++) {
+              out[(f * n + track) * dims + d] = (prev[d] + w * (cur[d] - prev[d])) / scale;
+            }
+          }
+        }
+        prev.set(cur);
+        lastFrame = frame;
+      }
+      for (let f = lastFrame + 1; f < frames1 && m > 0; f++) {
+        for (let d = 0; d < dims; d++) out[(f * n + track) * dims + d] = prev[d] / scale;
+      }
+    }
+    return out;
+  }
+
+  // Visibility per frame and path from the initial state and the change frames.
+  function visibility(h, s) {
+    if (sum(s.visCounts) !== s.visFrames.length) throw new Corrupt("the visibility counts do not add up");
+    const p = h.paths;
+    const out = new Uint8Array(h.frames * p);
+    let k = 0;
+    for (let path = 0; path < p; path++) {
+      let state = s.vis0[path] ? 1 : 0;
+      let from = 0;
+      let frame = 0;
+      for (let j = 0; j < s.visCounts[path]; j++, k++) {
+        frame += s.visFrames[k];
+        if (frame <= from || frame >= h.frames) throw new Corrupt("a visibility change is out of order");
+        for (let f = from; f < frame; f++) out[f * p + path] = state;
+        state ^= 1;
+        from = frame;
+      }
+      for (let f = from; f < h.frames; f++) out[f * p + path] = state;
+    }
+    return out;
+  }
+
+  function decode(block) {
+    const { h, s, gouraud } = parse(block);
+    const frames1 = h.frames + 1;
+    const xy = expand(s.posCounts, s.posFrames, s.posValues, 2, frames1, h.scale, 0, Float32Array);
+    if (s.head) { // positions are local to the head transform: to px, once
+      const nv = h.vertices;
+      for (let f = 0; f < frames1; f++) {
+        const m = s.head.subarray(6 * f, 6 * f + 6);
+        for (let i = 2 * f * nv, end = 2 * (f + 1) * nv; i < end; i += 2) {
+          const x = xy[i], y = xy[i + 1];
+          xy[i] = m[0] * x + m[1] * y + m[2];
+          xy[i + 1] = m[3] * x + m[4] * y + m[5];
+        }
+      }
+    }
+    return {
+      h, gouraud,
+      pathVertices: s.pathVertices,
+      xy,
+      rgb: expand(s.colorCounts, s.colorFrames, s.colorValues, 3, frames1, 1, 256, Uint8ClampedArray),
+      shown: visibility(h, s),
+    };
+  }
+
+  // Renderers: draw(positions (x, y px per drawn corner), colours (r, g, b, 255 per corner), corners).
+  function webglRenderer(cv, width, height) {
+    let gl = null;
+    try {
+      gl = cv.getContext("webgl", { antialias: true, alpha: true, premultipliedAlpha: true, depth: false });
+    } catch (e) {
+      gl = null;
+    }
+    if (!gl) return null;
+    const vs = "attribute vec2 p;attribute vec4 c;uniform vec2 s;varying vec4 v;" +
+      "void main(){gl_Position=vec4(p.x*s.x-1.0,1.0-p.y*s.y,0.0,1.0);v=c;}";
+    const fs = "precision mediump float;varying vec4 v;void main(){gl_FragColor=v;}";
+    const prog = gl.createProgram();
+    for (const [type, src] of [[gl.VERTEX_SHADER, vs], [gl.FRAGMENT_SHADER, fs]]) {
+      const sh = gl.createShader(type);
+      gl.shaderSource(sh, src);
+      gl.compileShader(sh);
+      if (!gl.getShaderParameter(sh, gl.COMPILE_STATUS)) return null;
+      gl.attachShader(prog, sh);
+    }
+    gl.linkProgram(prog);
+    if (!gl.getProgramParameter(prog, gl.LINK_STATUS)) return null;
+    gl.useProgram(prog);
+    const posBuf = gl.createBuffer();
+    const colBuf = gl.createBuffer();
+    const pLoc = gl.getAttribLocation(prog, "p");
+    const cLoc = gl.getAttribLocation(prog, "c");
+    gl.enableVertexAttribArray(pLoc);
+    gl.enableVertexAttribArray(cLoc);
+    gl.uniform2f(gl.getUniformLocation(prog, "s"), 2 / width, 2 / height);
+    gl.disable(gl.DEPTH_TEST); // painter's order: later triangles cover earlier ones
+    return {
+      name: "webgl",
+      draw(pos, col, corners) {
+        gl.viewport(0, 0, cv.width, cv.height);
+        gl.clearColor(0, 0, 0, 0);
+        gl.clear(gl.COLOR_BUFFER_BIT);
+        if (!corners) return;
+        gl.bindBuffer(gl.ARRAY_BUFFER, posBuf);
+        gl.bufferData(gl.ARRAY_BUFFER, pos.subarray(0, 2 * corners), gl.STREAM_DRAW);
+        gl.vertexAttribPointer(pLoc, 2, gl.FLOAT, false, 0, 0);
+        gl.bindBuffer(gl.ARRAY_BUFFER, colBuf);
+        gl.bufferData(gl.ARRAY_BUFFER, col.subarray(0, 4 * corners), gl.STREAM_DRAW);
+        gl.vertexAttribPointer(cLoc, 4, gl.UNSIGNED_BYTE, true, 0, 0);
+        gl.drawArrays(gl.TRIANGLES, 0, corners);
+      },
+    };
+  }
+
+  // Canvas 2D: flat triangles with the SVG's seam stroke; Gouraud falls back to each triangle's mean colour.
+  function canvasRenderer(cv, width, height) {
+    const ctx = cv.getContext("2d");
+    if (!ctx) return null;
+    return {
+      name: "canvas2d",
+      draw(pos, col, corners) {
+        ctx.setTransform(cv.width / width, 0, 0, cv.height / height, 0, 0);
+        ctx.clearRect(0, 0, width, height);
+        ctx.lineWidth = STROKE_PX;
+        ctx.lineJoin = "round";
+        for (let i = 0; i < corners; i += 3) {
+          const a = 4 * i;
+          const r = Math.round((col[a] + col[a + 4] + col[a + 8]) / 3);
+          const g = Math.round((col[a + 1] + col[a + 5] + col[a + 9]) / 3);
+          const b = Math.round((col[a + 2] + col[a + 6] + col[a + 10]) / 3);
+          ctx.fillStyle = ctx.strokeStyle = "rgb(" + r + "," + g + "," + b + ")";
+          ctx.beginPath();
+          ctx.moveTo(pos[2 * i], pos[2 * i + 1]);
+          ctx.lineTo(pos[2 * i + 2], pos[2 * i + 3]);
+          ctx.lineTo(pos[2 * i + 4], pos[2 * i + 5]);
+          ctx.closePath();
+          ctx.fill();
+          ctx.stroke();
+        }
+      },
+    };
+  }
+
+  // WebGL draws no strokes: each triangle grows by the SVG's half stroke width instead (every edge moved out by
+  // STROKE_PX / 2, a corner along its bisector, at most twice that), so silhouettes and thin triangles match the
+  // SVG's (the canvas 2D renderer strokes like the SVG). Degenerate triangles are left as they are.
+  const HALF = STROKE_PX / 2;
+  function grow(pos, k) {
+    const o = 2 * k;
+    const ax = pos[o], ay = pos[o + 1], bx = pos[o + 2], by = pos[o + 3], cx = pos[o + 4], cy = pos[o + 5];
+    // Unit edge directions a->b, b->c, c->a.
+    let ex = bx - ax, ey = by - ay, fx = cx - bx, fy = cy - by, gx = ax - cx, gy = ay - cy;
+    const le = Math.sqrt(ex * ex + ey * ey), lf = Math.sqrt(fx * fx + fy * fy), lg = Math.sqrt(gx * gx + gy * gy);
+    if (!(le > 1e-9 && lf > 1e-9 && lg > 1e-9)) return;
+    ex /= le; ey /= le; fx /= lf; fy /= lf; gx /= lg; gy /= lg;
+    // At corner a the edges leave along e and -g: the outward bisector is -(e - g).
+    if (!shift(pos, o, ex, ey, -gx, -gy) || !shift(pos, o + 2, fx, fy, -ex, -ey) ||
+        !shift(pos, o + 4, gx, gy, -fx, -fy)) {
+      pos[o] = ax; pos[o + 1] = ay; pos[o + 2] = bx; pos[o + 3] = by; pos[o + 4] = cx; pos[o + 5] = cy;
+    }
+  }
+  function shift(pos, i, ux, uy, wx, wy) {
+    const sx = ux + wx, sy = uy + wy;
+    const ls = Math.sqrt(sx * sx + sy * sy);
+    const sinHalf = Math.sqrt(Math.max(0, (1 - (ux * wx + uy * wy)) / 2));
+    if (!(ls > 1e-9 && sinHalf > 1e-9)) return false;
+    const d = Math.min(HALF / sinHalf, 2 * HALF) / ls;
+    pos[i] -= sx * d;
+    pos[i + 1] -= sy * d;
+    return true;
+  }
+
+  function start(anim) {
+    const { h, gouraud, pathVertices, xy, rgb, shown } = anim;
+    const p = h.paths;
+    const nv = h.vertices;
+    const nc = h.colorTracks;
+    const duration = h.frames / h.fps;
+    const dpr = Math.max(1, window.devicePixelRatio || 1);
+    canvas.width = Math.round(h.width * dpr);
+    canvas.height = Math.round(h.height * dpr);
+    canvas.style.width = h.width + "px";
+    const wanted = (window.facesvgPlayerOptions || {}).renderer; // "canvas2d" skips WebGL (tests, comparisons)
+    const renderer = (wanted !== "canvas2d" && webglRenderer(canvas, h.width, h.height)) ||
+      canvasRenderer(canvas, h.width, h.height);
+    if (!renderer) throw new Corrupt("this browser can draw neither WebGL nor canvas 2D");
+    const pos = new Float32Array(2 * 3 * p);
+    const col = new Uint8Array(4 * 3 * p);
+    const vxy = new Float32Array(2 * nv);
+    const vrgb = new Float32Array(3 * nc);
+
+    let time = 0; // seconds into the animation
+    let playing = !window.matchMedia("(prefers-reduced-motion: reduce)").matches;
+    let clockStart = null; // rAF timestamp at which `time` was `clockTime`
+    let clockTime = 0;
+    let drawnTime = -1;
+
+    function render(t) {
+      const u = Math.min(Math.max(t, 0), duration) * h.fps; // frames
+      let f = Math.floor(u);
+      if (f >= h.frames) f = h.frames - 1;
+      const w = u - f;
+      const a = f * nv * 2;
+      const b = a + nv * 2;
+      for (let i = 0; i < 2 * nv; i++) vxy[i] = xy[a + i] + w * (xy[b + i] - xy[a + i]);
+      const ca = f * nc * 3;
+      const cb = ca + nc * 3;
+      for (let i = 0; i < 3 * nc; i++) vrgb[i] = rgb[ca + i] + w * (rgb[cb + i] - rgb[ca + i]);
+      const vis = f * p;
+      let n = 0;
+      for (let j = 0; j < p; j++) {
+        if (!shown[vis + j]) continue;
+        for (let c = 0; c < 3; c++) {
+          const v = pathVertices[3 * j + c];
+          pos[2 * n] = vxy[2 * v];
+          pos[2 * n + 1] = vxy[2 * v + 1];
+          const src = 3 * (gouraud ? v : j);
+          col[4 * n] = Math.round(vrgb[src]);
+          col[4 * n + 1] = Math.round(vrgb[src + 1]);
+          col[4 * n + 2] = Math.round(vrgb[src + 2]);
+          col[4 * n + 3] = 255;
+          n++;
+        }
+        if (renderer.name === "webgl") grow(pos, n - 3);
+      }
+      renderer.draw(pos, col, n);
+      drawnTime = t;
+      scrub.value = String(t);
+      timeLabel.textContent = t.toFixed(2) + " s";
+    }
+
+    function setPlaying(on) {
+      playing = on;
+      clockStart = null;
+      clockTime = time;
+      playButton.textContent = on ? "Pause" : "Play";
+      playButton.setAttribute("aria-pressed", on ? "true" : "false");
+    }
+
+    function frame(now) {
+      if (playing) {
+        if (clockStart === null) {
+          clockStart = now;
+          clockTime = time;
+        }
+        let t = clockTime + (now - clockStart) / 1000;
+        if (t >= duration) {
+          if (loopBox.checked) {
+            t %= duration;
+          } else {
+            t = (h.frames - 1) / h.fps;
+            setPlaying(false);
+          }
+        }
+        time = t;
+      }
+      if (time !== drawnTime) render(time);
+      requestAnimationFrame(frame);
+    }
+
+    function seek(t) {
+      time = Math.min(Math.max(Number(t) || 0, 0), duration);
+      if (time >= duration) time = loopBox.checked ? 0 : (h.frames - 1) / h.fps;
+      clockStart = null;
+      clockTime = time;
+      render(time);
+    }
+
+    scrub.max = String(duration);
+    scrub.step = String(1 / h.fps / 4);
+    playButton.addEventListener("click", () => setPlaying(!playing));
+    canvas.addEventListener("click", () => setPlaying(!playing));
+    document.addEventListener("keydown", (e) => {
+      if (e.code === "Space" && e.target === document.body) {
+        e.preventDefault();
+        setPlaying(!playing);
+      }
+    });
+    scrub.addEventListener("input", () => {
+      setPlaying(false);
+      seek(Number(scrub.value));
+    });
+    Object.assign(api, {
+      state: "ready", renderer: renderer.name, frames: h.frames, fps: h.fps, duration,
+      seek(t) { setPlaying(false); seek(t); },
+      play() { setPlaying(true); },
+      pause() { setPlaying(false); },
+      positions(f) { return Array.from(xy.subarray(2 * nv * f, 2 * nv * (f + 1))); }, // frame f's px (tests)
+    });
+    Object.defineProperties(api, { // live values (Object.assign would copy a getter's value once)
+      time: { get: () => time, enumerable: true },
+      playing: { get: () => playing, enumerable: true },
+    });
+    setPlaying(playing);
+    render(0);
+    root.dataset.state = "ready";
+    requestAnimationFrame(frame);
+  }
+
+  async function main() {
+    try {
+      if (new Uint8Array(new Uint16Array([1]).buffer)[0] !== 1) {
+        throw new Corrupt("this device is big-endian, which the player does not support");
+      }
+      const node = $("facesvg-data");
+      const expected = Number(node && node.dataset.bytes);
+      if (!node || !(expected >= HEADER_BYTES && expected <= 1 << 30)) {
+        throw new Corrupt("the page has no data block of a valid length");
+      }
+      const block = await inflate(base64Bytes(node.textContent), expected);
+      start(decode(block));
+    } catch (e) {
+      const why = e instanceof Corrupt ? e.message : "an unexpected error (" + (e && e.message) + ")";
+      fail("This animation cannot be played: " + why + ". Regenerate the file with facesvg.");
+    }
+  }
+
+  main();
+})();

@@ -1,0 +1,285 @@
+"""The player output (--to player): its block decodes back to the sheet within the tolerance, the verifier reads it,
+it plays in Chromium like the SVG of the same conversion, a damaged block shows a message, the web serves it."""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import io
+import re
+import zlib
+
+import numpy as np
+import pytest
+from PIL import Image
+from skimage.metrics import structural_similarity
+
+from conftest import cube_animation
+from converter import extract, formats
+from converter.animation import FaceAnimation
+from converter.cli import main
+from converter.encode.order import draw_list
+from converter.errors import InputError
+from converter.options import ConversionOptions, Report
+from converter.verify import verify_animation
+from converter.writers import player, svg_anim
+from svgrender import chromium_frames
+from web.conftest import SMALL, glb_bytes, make_app, wait_job
+
+SIZE = 128
+TIMES = (0.0, 0.37, 0.55, 0.79)  # seconds: on and between frames of the 24 at 30 fps
+# SSIM to the SVG at 128 px, measured: WebGL 0.960-0.965 (it grows triangles by the SVG's half stroke; what is
+# left is multisampling against analytic anti-aliasing; 0.976 at 256 px), canvas 2D (which strokes like the SVG)
+# 0.988-0.996.
+SSIM_MIN = {"webgl": 0.94, "canvas2d": 0.97}
+
+
+@pytest.fixture(scope="module")
+def case(sample_path):
+    """The first 24 frames of the bundled sample at 128 px: prepared animation, sheet, options, player bytes."""
+    anim = formats.load(sample_path).sliced(0, 24)
+    sheet = extract.extract(anim, extract.fit_camera(anim, SIZE))
+    options = ConversionOptions(size=SIZE)
+    report = Report()
+    return anim, sheet, options, player.write(sheet, options, report), report
+
+
+def _block(data: bytes) -> bytes:
+    meta, packed, n = player._blocks(data)
+    return zlib.decompress(packed)
+
+
+def _with_block(data: bytes, block: bytes) -> bytes:
+    """The player file with another block (deflated, base64, its stated length updated)."""
+    text = data.decode()
+    text = re.sub(r'data-bytes="\d+">[^<]*<', f'data-bytes="{len(block)}">'
+                  + base64.b64encode(zlib.compress(block, 9)).decode() + "<", text)
+    return text.encode()
+
+
+def _section_offsets(block: bytes) -> dict[str, int]:
+    """Byte offset in the block of each section (HEADER, then the sections padded to 4 bytes)."""
+    h = player.HEADER.unpack_from(block)
+    n_v, p, n_pk = h[8], h[9], h[10]
+    sizes = [("vertex_ids", 4 * n_v), ("triangles", 4 * p), ("path_vertices", 12 * p), ("vis0", p),
+             ("vis_counts", 2 * p), ("vis_frames", 2 * h[13]), ("pos_counts", 2 * n_v), ("pos_frames", 2 * n_pk),
+             ("pos_values", 0)]
+    out, pos = {}, player.HEADER.size
+    for name, size in sizes:
+        out[name] = pos
+        pos += size + (-size % 4)
+    return out
+
+
+def _tampered(data: bytes, section: str, value: bytes, fix_crc: bool = True) -> bytes:
+    """The file with bytes of a section overwritten (the CRC recomputed unless fix_crc is False)."""
+    block = bytearray(_block(data))
+    at = _section_offsets(bytes(block))[section]
+    block[at:at + len(value)] = value
+    if fix_crc:
+        fields = list(player.HEADER.unpack_from(block))
+        fields[-1] = zlib.crc32(bytes(block[player.HEADER.size:]))
+        block[:player.HEADER.size] = player.HEADER.pack(*fields)
+    return _with_block(data, bytes(block))
+
+
+def test_the_block_decodes_to_the_sheet_within_the_tolerance(case):
+    anim, sheet, options, data, report = case
+    d = player.decode(data)
+    dl = draw_list(sheet)
+    keep = dl.active.any(axis=0)
+    assert np.array_equal(d.triangles, dl.triangles[keep])  # the SVG's painter's order
+    assert np.array_equal(d.shown, dl.active[:, keep])
+    assert np.array_equal(d.vertex_ids[d.path_vertices], sheet.faces[d.triangles])  # every vertex stored once
+    assert len(np.unique(d.vertex_ids)) == len(d.vertex_ids)
+    err = np.linalg.norm(d.path_xy() - sheet.xy[:, sheet.faces[d.triangles]], axis=-1)
+    assert err[d.shown].max() <= options.tolerance
+    assert err[d.shown].max() > options.tolerance / 4  # keyframed, not stored exactly
+    assert report.counts["keys"] < 0.5 * len(d.vertex_ids) * d.frames
+    cerr = np.abs(d.rgb[:-1] - sheet.face_rgb[:, d.triangles] * 255).max(axis=-1)
+    assert cerr[d.shown].max() <= svg_anim.COLOR_TOLERANCE and not d.gouraud
+    assert d.meta["frames"] == 24 and d.meta["viewport"] == [SIZE, SIZE]
+    assert player.write(sheet, options, Report()) == data  # deterministic
+
+
+def test_gouraud_keys_vertex_colours():
+    anim = cube_animation(6)
+    sheet = extract.extract(anim, extract.fit_camera(anim, 64), occlusion=False)
+    data = player.write(sheet, ConversionOptions(size=64, shading="gouraud"), Report())
+    d = player.decode(data)
+    assert d.gouraud and d.rgb.shape[1] == len(d.vertex_ids)
+    err = np.abs(d.rgb[:-1] - sheet.vertex_rgb[:, d.vertex_ids] * 255).max(axis=-1)
+    used = np.zeros(err.shape, bool)
+    for k in range(d.frames):
+        used[k, np.unique(d.path_vertices[d.shown[k]])] = True
+    assert err[used].max() <= svg_anim.COLOR_TOLERANCE
+
+
+def test_verify_reads_the_player_and_catches_wrong_data(case):
+    anim, sheet, options, data, report = case
+    v = verify_animation(data, anim)
+    assert v.ok and v.paths == report.counts["paths"] and v.frames == 24
+    block = _block(data)
+    low = block[_section_offsets(block)["pos_values"]]  # low byte of the first vertex's x: +-128 units, 10.7 px
+    bad = verify_animation(_tampered(data, "pos_values", bytes([low ^ 0x80])), anim)
+    assert not bad.ok and bad.max_px > 5
+    hidden = _tampered(data, "vis0", b"\x00" * 8)  # the first paths hidden where they show
+    assert verify_animation(hidden, anim).visibility_mismatches > 0
+    with pytest.raises(InputError, match="CRC-32"):
+        verify_animation(_tampered(data, "pos_values", b"\x01\x02", fix_crc=False), anim)
+    cut = data.replace(b'data-bytes="', b'data-bytes="9', 1)
+    with pytest.raises(InputError, match="truncated|longer"):
+        player.decode(cut)
+
+
+def test_the_script_fetches_nothing_and_evaluates_no_strings(case):
+    script = player.player_script()
+    for word in ("fetch", "XMLHttpRequest", "eval", "Function", "setTimeout", "setInterval", "import", "WebSocket",
+                 "innerHTML"):
+        assert not re.search(rf"\b{word}\b", script), word
+    text = case[3].decode()
+    assert "http://" not in text and "https://" not in text
+    assert f"<script>{script}</script>" in text  # the hashable inline block the web CSP allows
+
+
+def test_cli_writes_the_player(tmp_path, sample_path):
+    out = tmp_path / "face.html"
+    assert main(["convert", str(sample_path), "--to", "player", "--size", "64", "--end", "4", "-q", "-o",
+                 str(out)]) == 0
+    assert player.is_player(out.read_bytes()) and player.decode(out.read_bytes()).frames == 4
+    assert main(["convert", str(sample_path), "--to", "player", "--frame", "1", "-o", str(tmp_path / "x.html")]) == 2
+
+
+def test_the_web_api_makes_the_player_and_serves_it_under_a_hash_csp(tmp_path):
+    app = make_app(tmp_path, "embedded")
+    client = app.test_client()
+    try:
+        r = client.post("/api/v1/jobs", data={**SMALL, "to": "player", "file": (io.BytesIO(glb_bytes()), "cube.glb")},
+                        content_type="multipart/form-data")
+        assert r.status_code == 202, r.get_json()
+        job = wait_job(client, r.get_json()["id"])
+        assert job["state"] == "done", job
+        assert job["result"]["report"]["figures"]["within_tolerance"] is True  # the verifier read the player
+        page = client.get(job["links"]["result"])
+        assert page.status_code == 200 and page.mimetype == "text/html" and player.is_player(page.data)
+        csp = page.headers["Content-Security-Policy"]
+        digest = base64.b64encode(hashlib.sha256(player.player_script().encode()).digest()).decode()
+        assert f"script-src 'sha256-{digest}';" in csp
+        assert "connect-src 'none'" in csp and "default-src 'none'" in csp and "unsafe" not in csp
+        html = client.get(f"/jobs/{job['id']}").data.decode()
+        assert 'id="player-view"' in html
+    finally:
+        app.extensions["facesvg_queue"].close()
+
+
+def _open(browser, data: bytes, **context):
+    ctx = browser.new_context(viewport={"width": 400, "height": 400}, **context)
+    page = ctx.new_page()
+    page.set_content(data.decode())
+    page.wait_for_function("() => window.facesvgPlayer && window.facesvgPlayer.state !== 'loading'", timeout=30_000)
+    return ctx, page
+
+
+def _player_frames(page, times) -> np.ndarray:
+    out = []
+    for t in times:
+        page.evaluate("(t) => facesvgPlayer.seek(t)", t)
+        png = page.locator("#facesvg-canvas").screenshot()
+        out.append(np.asarray(Image.open(io.BytesIO(png)).convert("RGB")))
+    return np.stack(out)
+
+
+@pytest.mark.browser
+def test_the_player_draws_like_the_svg_in_chromium(browser, case, artifacts):
+    anim, sheet, options, data, report = case
+    svg = chromium_frames(browser, svg_anim.write(sheet, options, Report()), list(TIMES), SIZE, SIZE)
+    alpha = svg[..., 3:4] / 255.0
+    svg_rgb = np.round(svg[..., :3] * alpha + 255 * (1 - alpha)).astype(np.uint8)  # the page is white
+    for renderer in ("webgl", "canvas2d"):
+        ctx = browser.new_context(viewport={"width": 400, "height": 400})
+        if renderer == "canvas2d":
+            ctx.add_init_script("window.facesvgPlayerOptions = {renderer: 'canvas2d'}")
+        page = ctx.new_page()
+        try:
+            page.set_content(data.decode())
+            page.wait_for_function("() => window.facesvgPlayer && window.facesvgPlayer.state !== 'loading'",
+                                   timeout=30_000)
+            assert page.evaluate("() => [facesvgPlayer.state, facesvgPlayer.renderer]") == ["ready", renderer]
+            got = _player_frames(page, TIMES)
+        finally:
+            ctx.close()
+        for i, t in enumerate(TIMES):
+            score = structural_similarity(got[i], svg_rgb[i], channel_axis=2, data_range=255)
+            assert score >= SSIM_MIN[renderer], f"{renderer} at {t} s: SSIM {score:.3f} to the SVG"
+        Image.fromarray(np.concatenate([np.concatenate(got, 1), np.concatenate(svg_rgb, 1)], 0)).save(
+            artifacts / f"player_vs_svg_{renderer}.png")
+        assert np.abs(got[0].astype(int) - got[-1].astype(int)).mean() > 0.5  # it moves
+
+
+@pytest.mark.browser
+@pytest.mark.parametrize("rigid", [True, False])
+def test_the_script_decodes_what_python_decodes(browser, sample_path, rigid):
+    anim = formats.load(sample_path).sliced(0, 12)
+    extent = float(np.ptp(anim.frames[0], axis=0).max())
+    sway = np.random.default_rng(1).normal(0, 0.01 * extent, (12, 1, 3)).astype(np.float32)  # a head pays
+    anim = FaceAnimation(anim.frames + sway, anim.faces, anim.part_ids, anim.parts, anim.fps, anim.name)
+    sheet = extract.extract(anim, extract.fit_camera(anim, 96), occlusion=False)
+    report = Report()
+    data = player.write(sheet, ConversionOptions(size=96, rigid=rigid, shading="gouraud"), report)
+    assert report.counts["player_head_transform"] == int(rigid)
+    d = player.decode(data)
+    ctx, page = _open(browser, data)
+    try:
+        for f in (0, 5, 12):  # 12: the loop end
+            js = np.array(page.evaluate("(f) => facesvgPlayer.positions(f)", f)).reshape(-1, 2)
+            np.testing.assert_allclose(js, d.xy[f], atol=1e-3)
+    finally:
+        ctx.close()
+
+
+@pytest.mark.browser
+def test_reduced_motion_starts_paused_and_play_toggles(browser, case):
+    data = case[3]
+    ctx, page = _open(browser, data, reduced_motion="reduce")
+    try:
+        assert page.evaluate("() => [facesvgPlayer.playing, facesvgPlayer.time]") == [False, 0]
+        page.click("#facesvg-play")
+        page.wait_for_function("() => facesvgPlayer.time > 0.1", timeout=10_000)
+        page.keyboard.press("Space")  # focus is on the button: its own click pauses
+        assert page.evaluate("() => facesvgPlayer.playing") is False
+    finally:
+        ctx.close()
+    ctx, page = _open(browser, data)
+    try:
+        page.wait_for_function("() => facesvgPlayer.playing && facesvgPlayer.time > 0.1", timeout=10_000)
+    finally:
+        ctx.close()
+
+
+@pytest.mark.browser
+@pytest.mark.parametrize("damage", ["truncated", "bitflip", "crc", "stated length"])
+def test_a_damaged_block_shows_a_message(browser, case, damage):
+    data = case[3]
+    if damage == "truncated":
+        m = re.search(rb'data-bytes="\d+">([^<]*)<', data)
+        bad = data[:m.start(1) + len(m.group(1)) // 2] + data[m.end(1):]
+    elif damage == "bitflip":
+        meta, packed, n = player._blocks(data)
+        flipped = bytearray(packed)
+        flipped[len(flipped) // 2] ^= 0x5A
+        bad = re.sub(rb'(data-bytes="\d+">)[^<]*<', lambda m: m.group(1) + base64.b64encode(bytes(flipped)) + b"<",
+                     data)
+    elif damage == "crc":
+        bad = _tampered(data, "pos_values", b"\x01\x02", fix_crc=False)
+    else:  # a stated length far beyond the block: refused when the stream ends, nothing allocated for it
+        bad = re.sub(rb'data-bytes="(\d+)"', lambda m: b'data-bytes="' + m.group(1) + b'000"', data, count=1)
+    ctx = browser.new_context()
+    page = ctx.new_page()
+    try:
+        page.set_content(bad.decode())
+        page.wait_for_selector("#facesvg-message:not([hidden])", timeout=15_000)
+        text = page.inner_text("#facesvg-message")
+        assert text.startswith("This animation cannot be played") and "Regenerate" in text, text
+        assert page.evaluate("() => facesvgPlayer.state") == "error" and page.is_hidden("#facesvg-canvas")
+    finally:
+        ctx.close()
