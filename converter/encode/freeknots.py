@@ -145,9 +145,9 @@ def _advance(poly, cnt, tau, xk, e, tmp, nxt, ncnt) -> bool:
 
 
 @numba.njit(cache=True, nogil=True)
-def _reduce(x, active, eps, mask, values, bad, first, stop):
+def _reduce(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
     """Free-knot keys of tracks first..stop-1 into mask and values; bad marks tracks that need
-    sampled keys."""
+    sampled keys. A track stops early (gave_up, no keys written) once it cannot end with fewer than limit keys."""
     t, n, d = x.shape
     poly = np.empty((d, MAX_VERTS, 2))
     nxt = np.empty((d, MAX_VERTS, 2))
@@ -184,12 +184,15 @@ def _reduce(x, active, eps, mask, values, bad, first, stop):
                     cnt[c] = _rect(poly[c], lo, hi)
                 nseg += 1
                 s = last
+                if nseg + 2 >= limit[j] and not bad[j]:  # keys so far, the open segment's and the loop end's
+                    gave_up[j] = True
+                    break
                 if not _advance(poly, cnt, k - s, x[k, j], e, tmp, nxt, ncnt):
                     bad[j] = True  # cannot happen with a free velocity: safety net only
                     continue
             last = k
-        if last < 0:
-            continue  # never active: no keys
+        if last < 0 or gave_up[j]:
+            continue  # never active, or not worth finishing: no keys
         seg_t[nseg] = s
         for c in range(d):
             seg_cnt[nseg, c] = cnt[c]
@@ -225,34 +228,47 @@ def _reduce(x, active, eps, mask, values, bad, first, stop):
 
 def reduce_free(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray) -> keys.Keys:
     """Keys for tracks x (T, N, D) within eps per coordinate where active, with free key values."""
+    return _reduce_limited(x, active, eps, None)[0]
+
+
+def _reduce_limited(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray,
+                    limit: np.ndarray | None) -> tuple[keys.Keys, np.ndarray]:
+    """reduce_free, giving up (bool (N,), no keys) on each track that cannot end with fewer than limit (N,) keys."""
     x = np.ascontiguousarray(x, np.float64)
     t, n, d = x.shape
     active = np.ascontiguousarray(active, bool)
     eps = np.ascontiguousarray(np.broadcast_to(np.asarray(eps, np.float64), (n,)))
+    lim = np.full(n, np.iinfo(np.int64).max, np.int64) if limit is None else np.ascontiguousarray(limit, np.int64)
     mask, values = np.zeros((t + 1, n), bool), np.zeros((t + 1, n, d))
-    bad = np.zeros(n, bool)
+    bad, gave_up = np.zeros(n, bool), np.zeros(n, bool)
     if n and t:
-        parallel.threaded(_reduce, n, x, active, eps, mask, values, bad)
+        parallel.threaded(_reduce, n, x, active, eps, lim, mask, values, bad, gave_up)
     first = np.where(active.any(axis=0), np.argmax(active, axis=0), -1)
     if bad.any():  # numerically awkward tracks: sampled keys, always valid
         fb = keys.reduce(x[:, bad], active[:, bad], eps[bad])
         mask[:, bad], values[:, bad] = fb.mask, fb.values
-    return keys.Keys(mask, values, first)
+    return keys.Keys(mask, values, first), gave_up
 
 
 def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
-               shapes: tuple[float, ...] | None = None) -> keys.Keys:
-    """Free-knot keys for tracks of 2D points xy (T, N, 2m), each point within Euclidean radius where active."""
+               shapes: tuple[float, ...] | None = None, best: keys.Keys | None = None) -> keys.Keys:
+    """Free-knot keys for tracks of 2D points xy (T, N, 2m), each point within Euclidean radius where active;
+    with best, per track whichever of best and the shapes' keys has fewest (best on ties)."""
     shapes = SHAPES_DEG if shapes is None else shapes
     m = xy.shape[2] // 2
     r = np.broadcast_to(np.asarray(radius, np.float64), (xy.shape[1],))
-    best: keys.Keys | None = None
     for a in np.radians(shapes):
         # Half-widths r cos a (x) and r sin a (y): a rectangle inscribed in the circle. Captured jitter is
         # rarely the same on both axes, so the shape that needs fewest keys differs from path to path.
         s = np.tile([1 / math.cos(a), 1 / math.sin(a)], m)
-        k = reduce_free(xy * s, active, r)
+        # A shape only replaces best where it needs fewer keys: tracks stop as soon as they cannot.
+        k, gave_up = _reduce_limited(xy * s, active, r, None if best is None else best.mask.sum(axis=0))
         k = k._replace(values=k.values / s)
-        best = k if best is None else keys.fewest(best, k)
+        if best is None:
+            best = k
+        else:
+            win = ~gave_up & (k.mask.sum(axis=0) < best.mask.sum(axis=0))
+            best = keys.Keys(np.where(win, k.mask, best.mask), np.where(win[:, None], k.values, best.values),
+                             best.first_active)
     assert best is not None, "no shapes"
     return best

@@ -488,7 +488,7 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     at = np.searchsorted(cand, w)
     keys.mask[:, w], keys.values[:, w] = kl.mask[:, at], kl.values[:, at]
     if len(freeknots.SHAPES_DEG) > 1:
-        keys = keyframes.fewest(keys, freeknots.point_keys(out_track, act, radius, freeknots.SHAPES_DEG[1:]))
+        keys = freeknots.point_keys(out_track, act, radius, freeknots.SHAPES_DEG[1:], best=keys)
     return Plan(lay.order, out_track, radius, np.array(wrapped_runs, np.int64).reshape(-1, 2), band, gain,
                 lay.motions, stats, keys, lay.head)
 
