@@ -430,7 +430,6 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     lay = layout(xy, faces, part_ids, neutral, tris, active, budget, head_clusters=head_clusters,
                  merge_runs=merge_runs)
     act = active[:, lay.order]
-    glob = track[:, lay.order]
     global_radius = budget.keys
     r_local = budget.local_keys(lay.gain)
     r_head = float(budget.local_keys(np.array([lay.head.gain]))[0])
@@ -459,7 +458,10 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     kl_n[cand] = kl.mask.sum(axis=0)
     # The plain encoding's key count only decides whether grouping pays: estimated from every PLAIN_SAMPLE-th path.
     sample = np.arange(0, p, PLAIN_SAMPLE if p >= 50 * PLAIN_SAMPLE else 1)
-    plain_keys = int(round(keys_of(glob, global_radius, sample).mask.sum() * p / len(sample)))
+    plain = freeknots.point_keys(np.asarray(track[:, lay.order[sample]], np.float64), act[:, sample],
+                                 np.broadcast_to(max(global_radius, 1e-6), (p,))[sample], freeknots.SHAPES_DEG[:1])
+    plain_keys = int(round(plain.mask.sum() * p / len(sample)))
+    del plain
     saved = (kh_n - kl_n) * costs.key
     wrapped_runs = []
     wrapped = np.zeros(p, bool)
@@ -476,10 +478,13 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
              "max_gain": float(max(lay.gain.max(), lay.head.gain)) if p else 1.0}
     if grouped_cost >= plain_keys * costs.key:  # the plain encoding is shorter: no groups
         stats.update(groups=0, grouped_paths=0, transform_bytes=0, keys_rigid=plain_keys)
-        return Plan(lay.order, glob, np.full(p, global_radius), np.zeros((0, 2), np.int64), np.full(p, -1),
+        return Plan(lay.order, np.asarray(track[:, lay.order], np.float64), np.full(p, global_radius),
+                    np.zeros((0, 2), np.int64), np.full(p, -1),
                     np.ones(p), lay.motions, stats, None, None)
     stats.update(transform_bytes=transform_bytes, keys_rigid=int(n_keys.sum()))
-    out_track = np.where(wrapped[None, :, None], lay.local, lay.head_local)
+    out_track = lay.head_local  # in place: the head-local tracks are not needed any more
+    out_track[:, wrapped] = lay.local[:, wrapped]
+    lay = lay._replace(local=None, head_local=None)
     radius = np.where(wrapped, r_local, r_head)
     band = np.where(wrapped, lay.band, -1)
     gain = np.where(wrapped, lay.gain, lay.head.gain)
@@ -487,6 +492,7 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     w = np.flatnonzero(wrapped)
     at = np.searchsorted(cand, w)
     keys.mask[:, w], keys.values[:, w] = kl.mask[:, at], kl.values[:, at]
+    del kl
     if len(freeknots.SHAPES_DEG) > 1:
         keys = freeknots.point_keys(out_track, act, radius, freeknots.SHAPES_DEG[1:], best=keys)
     return Plan(lay.order, out_track, radius, np.array(wrapped_runs, np.int64).reshape(-1, 2), band, gain,
