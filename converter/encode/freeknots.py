@@ -29,6 +29,7 @@ BIG = 1e7  # bound of the unconstrained first value and of every velocity (px, p
 MAX_VERTS = 40  # polygon capacity; a segment whose polygon would outgrow it is cut early (still valid)
 ON_LINE = 1e-10  # relative distance below which a polygon vertex counts as on a cutting line
 SHAPES_DEG = (45.0, 30.0, 60.0)  # per path, the rectangle in each vertex's tolerance circle that needs fewest keys
+BLOCK_TRACKS = 1024  # tracks reduced together (bounds the scaled copy and the per-shape keys)
 SLACK = 1e-8  # the bound holds to eps + SLACK (eps + |x| + 1); tracks the final check rejects get sampled keys
 
 
@@ -145,9 +146,9 @@ def _advance(poly, cnt, tau, xk, e, tmp, nxt, ncnt) -> bool:
 
 
 @numba.njit(cache=True, nogil=True)
-def _reduce(x, active, eps, mask, values, bad, first, stop):
+def _reduce(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
     """Free-knot keys of tracks first..stop-1 into mask and values; bad marks tracks that need
-    sampled keys."""
+    sampled keys. A track stops early (gave_up, no keys written) once it cannot end with fewer than limit keys."""
     t, n, d = x.shape
     poly = np.empty((d, MAX_VERTS, 2))
     nxt = np.empty((d, MAX_VERTS, 2))
@@ -184,12 +185,15 @@ def _reduce(x, active, eps, mask, values, bad, first, stop):
                     cnt[c] = _rect(poly[c], lo, hi)
                 nseg += 1
                 s = last
+                if nseg + 2 >= limit[j] and not bad[j]:  # keys so far, the open segment's and the loop end's
+                    gave_up[j] = True
+                    break
                 if not _advance(poly, cnt, k - s, x[k, j], e, tmp, nxt, ncnt):
                     bad[j] = True  # cannot happen with a free velocity: safety net only
                     continue
             last = k
-        if last < 0:
-            continue  # never active: no keys
+        if last < 0 or gave_up[j]:
+            continue  # never active, or not worth finishing: no keys
         seg_t[nseg] = s
         for c in range(d):
             seg_cnt[nseg, c] = cnt[c]
@@ -225,34 +229,62 @@ def _reduce(x, active, eps, mask, values, bad, first, stop):
 
 def reduce_free(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray) -> keys.Keys:
     """Keys for tracks x (T, N, D) within eps per coordinate where active, with free key values."""
-    x = np.ascontiguousarray(x, np.float64)
+    t, n, d = x.shape
+    out = keys.Keys(np.zeros((t + 1, n), bool), np.zeros((t + 1, n, d)),
+                    np.where(np.any(active, axis=0), np.argmax(active, axis=0), -1))
+    for a in range(0, n, BLOCK_TRACKS):
+        k, _ = _reduce_block(x[:, a:a + BLOCK_TRACKS], active[:, a:a + BLOCK_TRACKS],
+                             np.broadcast_to(np.asarray(eps, np.float64), (n,))[a:a + BLOCK_TRACKS], None)
+        out.mask[:, a:a + BLOCK_TRACKS], out.values[:, a:a + BLOCK_TRACKS] = k.mask, k.values
+    return out
+
+
+def _reduce_block(x: np.ndarray, active: np.ndarray, eps: np.ndarray, limit: np.ndarray | None,
+                  scale: np.ndarray | None = None) -> tuple[keys.Keys, np.ndarray]:
+    """reduce_free of the tracks x * scale (the keys' values scaled back), giving up (bool (N,), no keys) on each
+    track that cannot end with fewer than limit (N,) keys."""
+    x = np.ascontiguousarray(x if scale is None else x * scale, np.float64)
     t, n, d = x.shape
     active = np.ascontiguousarray(active, bool)
-    eps = np.ascontiguousarray(np.broadcast_to(np.asarray(eps, np.float64), (n,)))
+    eps = np.ascontiguousarray(eps, np.float64)
+    lim = np.full(n, np.iinfo(np.int64).max, np.int64) if limit is None else np.ascontiguousarray(limit, np.int64)
     mask, values = np.zeros((t + 1, n), bool), np.zeros((t + 1, n, d))
-    bad = np.zeros(n, bool)
+    bad, gave_up = np.zeros(n, bool), np.zeros(n, bool)
     if n and t:
-        parallel.threaded(_reduce, n, x, active, eps, mask, values, bad)
-    first = np.where(active.any(axis=0), np.argmax(active, axis=0), -1)
+        parallel.threaded(_reduce, n, x, active, eps, lim, mask, values, bad, gave_up)
     if bad.any():  # numerically awkward tracks: sampled keys, always valid
         fb = keys.reduce(x[:, bad], active[:, bad], eps[bad])
         mask[:, bad], values[:, bad] = fb.mask, fb.values
-    return keys.Keys(mask, values, first)
+    if scale is not None:
+        np.divide(values, scale, out=values)
+    return keys.Keys(mask, values, np.zeros(0, np.int64)), gave_up
 
 
 def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
-               shapes: tuple[float, ...] | None = None) -> keys.Keys:
-    """Free-knot keys for tracks of 2D points xy (T, N, 2m), each point within Euclidean radius where active."""
+               shapes: tuple[float, ...] | None = None, best: keys.Keys | None = None) -> keys.Keys:
+    """Free-knot keys for tracks of 2D points xy (T, N, 2m), each point within Euclidean radius where active;
+    with best, per track whichever of best and the shapes' keys has fewest (best on ties; best's arrays are
+    updated in place and returned)."""
     shapes = SHAPES_DEG if shapes is None else shapes
+    t, n = xy.shape[:2]
     m = xy.shape[2] // 2
-    r = np.broadcast_to(np.asarray(radius, np.float64), (xy.shape[1],))
-    best: keys.Keys | None = None
+    r = np.broadcast_to(np.asarray(radius, np.float64), (n,))
     for a in np.radians(shapes):
         # Half-widths r cos a (x) and r sin a (y): a rectangle inscribed in the circle. Captured jitter is
         # rarely the same on both axes, so the shape that needs fewest keys differs from path to path.
         s = np.tile([1 / math.cos(a), 1 / math.sin(a)], m)
-        k = reduce_free(xy * s, active, r)
-        k = k._replace(values=k.values / s)
-        best = k if best is None else keys.fewest(best, k)
+        if best is None:
+            best = keys.Keys(np.zeros((t + 1, n), bool), np.zeros((t + 1, n, 2 * m)),
+                             np.where(np.any(active, axis=0), np.argmax(active, axis=0), -1))
+            limit = None
+        else:
+            limit = best.mask.sum(axis=0)
+        for b in range(0, n, BLOCK_TRACKS):  # blocks of tracks: the scaled copy and the keys stay small
+            sl = slice(b, b + BLOCK_TRACKS)
+            # A shape only replaces best where it needs fewer keys: tracks stop as soon as they cannot.
+            k, gave_up = _reduce_block(xy[:, sl], active[:, sl], r[sl], None if limit is None else limit[sl], s)
+            win = np.arange(len(gave_up)) if limit is None else np.flatnonzero(
+                ~gave_up & (k.mask.sum(axis=0) < limit[sl]))
+            best.mask[:, b + win], best.values[:, b + win] = k.mask[:, win], k.values[:, win]
     assert best is not None, "no shapes"
     return best

@@ -49,6 +49,7 @@ import numpy as np
 from scipy import sparse
 from scipy.cluster.vq import kmeans2
 from scipy.sparse.csgraph import connected_components
+from scipy.sparse.linalg import LinearOperator, eigsh
 
 from converter.encode import freeknots
 from converter.encode import keys as keyframes
@@ -200,13 +201,26 @@ def motion_clusters(band: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutral
         return out  # the head moves rigidly: one band explains it
     feat = res.transpose(1, 0, 2).reshape(len(verts), -1)
     feat = feat - feat.mean(axis=0)
-    u, sv, _ = np.linalg.svd(feat, full_matrices=False)
-    feat = u[:, :CLUSTER_COMPONENTS] * sv[:CLUSTER_COMPONENTS]
+    feat = principal_components(feat, CLUSTER_COMPONENTS)
     place = (ref - center) / max(float((ref - center).std()), 1e-9) * float(feat.std()) * CLUSTER_PLACE_WEIGHT
     tri_feat = np.c_[feat, place][pos.reshape(-1, 3)].mean(axis=1)
     _, label = kmeans2(tri_feat, k, seed=np.random.default_rng(0), minit="++")
     out[sel] += label
     return out
+
+
+def principal_components(feat: np.ndarray, k: int) -> np.ndarray:
+    """Coordinates (n, k) of the rows of centred feat (n, m) on its k leading principal axes (u s of the SVD).
+
+    Only the k leading axes are needed: Lanczos (ARPACK, fixed start vector, so deterministic) on feat^T feat
+    costs a few products with feat, where a full SVD costs n m^2 (3 s at 8k triangles x 335 frames)."""
+    n, m = feat.shape
+    if k >= min(n, m) - 1:
+        u, sv, _ = np.linalg.svd(feat, full_matrices=False)
+        return u[:, :k] * sv[:k]
+    op = LinearOperator((m, m), matvec=lambda x: feat.T @ (feat @ x), dtype=np.float64)
+    _, axes = eigsh(op, k=k, v0=np.ones(m))
+    return feat @ axes[:, ::-1]
 
 
 # --- affine fits and the transform stack -----------------------------------------------------------------------
@@ -264,29 +278,44 @@ def _decimals(step: float) -> int:
     return int(np.clip(math.ceil(-math.log10(max(2 * step, 1e-12))), 0, 8))
 
 
-def band_motion(params: np.ndarray, center: np.ndarray, radius: float, slack: float, scale: int,
-                kt_decimals: int = TIME_DECIMALS) -> BandMotion:
-    """Keyframed, rounded transform stack for fitted parameters (T, 6) about center; radius: band extent px;
-    slack: px the keyframing may leave to the residual; translate is kept in units of 1/scale px."""
-    t = len(params)
+STACK = {"translate": [0, 1], "rotate": [2], "skewX": [3], "scale": [4, 5]}  # parameter columns of each transform
+
+
+def _param_eps(radius: float, slack: float) -> np.ndarray:
+    """Per-parameter bound (6,) so each moves a point of a band of this radius by at most slack / 4 px."""
     radius = max(radius, 1.0)
-    # Per-parameter bound so each moves a point of the band by at most slack / 4 px.
     per = slack / 4
-    eps = np.array([per, per, math.degrees(per / radius), math.degrees(per / radius), per / radius, per / radius])
+    return np.array([per, per, math.degrees(per / radius), math.degrees(per / radius), per / radius, per / radius])
+
+
+def _param_tracks(params: np.ndarray, eps: np.ndarray) -> np.ndarray:
+    """(T, 4, 2) parameter groups of the transform stack in units of their bound (1-D ones padded with 0)."""
+    tracks = np.zeros((len(params), len(STACK), 2))
+    for i, cols in enumerate(STACK.values()):
+        tracks[:, i, :len(cols)] = params[:, cols] / eps[cols]
+    return tracks
+
+
+def band_motion(params: np.ndarray, center: np.ndarray, radius: float, slack: float, scale: int,
+                kt_decimals: int = TIME_DECIMALS, keys: keyframes.Keys | None = None) -> BandMotion:
+    """Keyframed, rounded transform stack for fitted parameters (T, 6) about center; radius: band extent px;
+    slack: px the keyframing may leave to the residual; translate is kept in units of 1/scale px. keys: the
+    parameter groups' keys (``keys.reduce`` of ``_param_tracks`` within 1) when already worked out."""
+    t = len(params)
+    eps = _param_eps(radius, slack)
+    radius = max(radius, 1.0)
     # Rounding of the written values: small against the slack so the residual does not pick up rounding noise.
     r = slack / 4
     rounding = {"translate": r, "rotate": math.degrees(r / radius), "skewX": math.degrees(r / radius),
                 "scale": r / radius}
     identity = np.array([0, 0, 0, 0, 1, 1.0])
-    groups = {"translate": [0, 1], "rotate": [2], "skewX": [3], "scale": [4, 5]}
+    groups = STACK
     anims = []
     played = np.tile(identity, (t, 1))
     frames_t = np.arange(t)
     q = 10 ** kt_decimals
-    tracks = np.zeros((t, len(groups), 2))  # every parameter group keyed in one pass (1-D ones padded with 0)
-    for i, cols in enumerate(groups.values()):
-        tracks[:, i, :len(cols)] = params[:, cols] / eps[cols]
-    keys = keyframes.reduce(tracks, np.ones((t, len(groups)), bool), 1.0)
+    if keys is None:  # every parameter group keyed in one pass
+        keys = keyframes.reduce(_param_tracks(params, eps), np.ones((t, len(groups)), bool), 1.0)
     for i, (kind, cols) in enumerate(groups.items()):
         x = params[:, cols]
         if kind != "translate" and np.abs(x - identity[cols]).max() <= eps[cols[0]]:
@@ -373,8 +402,8 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
     in_head = local_tracks(xy64[:, :, None, :], head.matrices)[:, :, 0]  # head frame px, about its centroid
     band_of_tri = motion_clusters(merged, faces, in_head, neutral, head_clusters)
     band_ids, band = np.unique(band_of_tri[tris], return_inverse=True)
-    motions = [_motion(in_head, np.unique(faces[band_of_tri == b]), neutral, BAND_SHARE * tolerance, scale,
-                       kt_decimals) for b in band_ids.tolist()]
+    motions = _motions(in_head, [np.unique(faces[band_of_tri == b]) for b in band_ids.tolist()], neutral,
+                       BAND_SHARE * tolerance, scale, kt_decimals)
     order = np.arange(len(tris))
     if merge_runs and len(tris) > 1:
         order = reorder(band, overlap_pairs(xy64[:, faces[tris]], active, band=band))
@@ -396,11 +425,27 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
 def _motion(xy: np.ndarray, verts: np.ndarray, neutral: int, slack: float, scale: int,
             kt_decimals: int) -> BandMotion:
     """The played transform of the vertices verts of xy (T, V, 2), fitted from the neutral frame."""
-    ref = xy[neutral, verts]
-    center = ref.mean(axis=0)
-    radius = float(np.linalg.norm(ref - center, axis=1).max()) if len(verts) else 1.0
-    params = decompose(fit_affine(ref - center, xy[:, verts]), np.zeros(2))
-    return band_motion(params, center, radius, slack, scale, kt_decimals)
+    return _motions(xy, [verts], neutral, slack, scale, kt_decimals)[0]
+
+
+def _motions(xy: np.ndarray, vert_sets: list[np.ndarray], neutral: int, slack: float, scale: int,
+             kt_decimals: int) -> list[BandMotion]:
+    """_motion of each vertex set, their transform parameters keyed in one pass (tracks are independent)."""
+    fits = []
+    for verts in vert_sets:
+        ref = xy[neutral, verts]
+        center = ref.mean(axis=0)
+        radius = float(np.linalg.norm(ref - center, axis=1).max()) if len(verts) else 1.0
+        fits.append((decompose(fit_affine(ref - center, xy[:, verts]), np.zeros(2)), center, radius))
+    if not fits:
+        return []
+    t, g = xy.shape[0], len(STACK)
+    tracks = np.concatenate([_param_tracks(p, _param_eps(r, slack)) for p, _, r in fits], axis=1)
+    keys = keyframes.reduce(tracks, np.ones((t, tracks.shape[1]), bool), 1.0)
+    return [band_motion(p, c, r, slack, scale, kt_decimals,
+                        keyframes.Keys(keys.mask[:, i * g:(i + 1) * g], keys.values[:, i * g:(i + 1) * g],
+                                       keys.first_active[i * g:(i + 1) * g]))
+            for i, (p, c, r) in enumerate(fits)]
 
 
 def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, tris: np.ndarray,
@@ -416,7 +461,6 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     lay = layout(xy, faces, part_ids, neutral, tris, active, budget, head_clusters=head_clusters,
                  merge_runs=merge_runs)
     act = active[:, lay.order]
-    glob = track[:, lay.order]
     global_radius = budget.keys
     r_local = budget.local_keys(lay.gain)
     r_head = float(budget.local_keys(np.array([lay.head.gain]))[0])
@@ -445,7 +489,10 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     kl_n[cand] = kl.mask.sum(axis=0)
     # The plain encoding's key count only decides whether grouping pays: estimated from every PLAIN_SAMPLE-th path.
     sample = np.arange(0, p, PLAIN_SAMPLE if p >= 50 * PLAIN_SAMPLE else 1)
-    plain_keys = int(round(keys_of(glob, global_radius, sample).mask.sum() * p / len(sample)))
+    plain = freeknots.point_keys(np.asarray(track[:, lay.order[sample]], np.float64), act[:, sample],
+                                 np.broadcast_to(max(global_radius, 1e-6), (p,))[sample], freeknots.SHAPES_DEG[:1])
+    plain_keys = int(round(plain.mask.sum() * p / len(sample)))
+    del plain
     saved = (kh_n - kl_n) * costs.key
     wrapped_runs = []
     wrapped = np.zeros(p, bool)
@@ -462,10 +509,13 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
              "max_gain": float(max(lay.gain.max(), lay.head.gain)) if p else 1.0}
     if grouped_cost >= plain_keys * costs.key:  # the plain encoding is shorter: no groups
         stats.update(groups=0, grouped_paths=0, transform_bytes=0, keys_rigid=plain_keys)
-        return Plan(lay.order, glob, np.full(p, global_radius), np.zeros((0, 2), np.int64), np.full(p, -1),
+        return Plan(lay.order, np.asarray(track[:, lay.order], np.float64), np.full(p, global_radius),
+                    np.zeros((0, 2), np.int64), np.full(p, -1),
                     np.ones(p), lay.motions, stats, None, None)
     stats.update(transform_bytes=transform_bytes, keys_rigid=int(n_keys.sum()))
-    out_track = np.where(wrapped[None, :, None], lay.local, lay.head_local)
+    out_track = lay.head_local  # in place: the head-local tracks are not needed any more
+    out_track[:, wrapped] = lay.local[:, wrapped]
+    lay = lay._replace(local=None, head_local=None)
     radius = np.where(wrapped, r_local, r_head)
     band = np.where(wrapped, lay.band, -1)
     gain = np.where(wrapped, lay.gain, lay.head.gain)
@@ -473,8 +523,9 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     w = np.flatnonzero(wrapped)
     at = np.searchsorted(cand, w)
     keys.mask[:, w], keys.values[:, w] = kl.mask[:, at], kl.values[:, at]
+    del kl
     if len(freeknots.SHAPES_DEG) > 1:
-        keys = keyframes.fewest(keys, freeknots.point_keys(out_track, act, radius, freeknots.SHAPES_DEG[1:]))
+        keys = freeknots.point_keys(out_track, act, radius, freeknots.SHAPES_DEG[1:], best=keys)
     return Plan(lay.order, out_track, radius, np.array(wrapped_runs, np.int64).reshape(-1, 2), band, gain,
                 lay.motions, stats, keys, lay.head)
 

@@ -47,6 +47,7 @@ COLOR_SLACK = 0.05  # levels kept free of evenly spaced colour keys (checked exa
 BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime): what groups weigh
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
 HIDDEN_CLASS = "h"
+RAW_COUNT_PATHS = 1024  # paths per block when counting the raw encoding's bytes
 
 
 def hex_colors(rgb: np.ndarray) -> np.ndarray:
@@ -243,7 +244,8 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     tris, active = tris[shown], active[:, shown]
     p = len(tris)
     dur = f"{sheet.duration:.6f}".rstrip("0").rstrip(".") + "s"  # SMIL clock values need the leading digit
-    track = sheet.xy[:, sheet.faces[tris]].reshape(t, p, 6).astype(np.float64)
+    track = sheet.xy[:, sheet.faces[tris]].reshape(t, p, 6)  # float32 as stored; float64 where keyframed
+    glob = track
     extra: dict = {"encoding": {"mode": mode}}
     budget = ErrorBudget.split(options.tolerance, max(sheet.camera.width, sheet.camera.height))
     plan = None
@@ -254,6 +256,8 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
             tris, active, track = tris[plan.order], active[:, plan.order], plan.track
         else:
             plan = None
+    if plan is None:
+        track = track.astype(np.float64)
     if mode in ("raw", "chapter"):
         body = _encode_raw(sheet, tris, active, track, dur, chapter=mode == "chapter")
         scale = 1
@@ -265,7 +269,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     report.counts["paths"] = p
     if mode == "bounded":
         # The raw file's d values alone, counted exactly (writing them would cost more than this conversion).
-        report.sizes["raw_d_values"] = raw_values_bytes(track)
+        report.sizes["raw_d_values"] = raw_values_bytes(glob)
     report.counts["depth_conflicts"] = dl.conflicts
     report.counts["depth_conflicts_left"] = dl.residual
     report.counts["layer_copies"] = int(len(tris) - len(np.unique(tris)))
@@ -274,11 +278,15 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
 
 def raw_values_bytes(track: np.ndarray) -> int:
     """Exact bytes of the raw encoding's d values for tracks (T, P, 6) px: every frame plus the held last,
-    'M x,y L x,y L x,y Z' with 2 decimals, ';' between (the bulk of a raw file; counted, not written)."""
-    c = np.rint(track * 100).astype(np.int64)
-    per_value = (_digits(np.abs(c) // 100) + 3 + (c < 0)).sum(axis=2) + 7 + 1  # numbers, M L L Z, 3 commas, ';'
+    'M x,y L x,y L x,y Z' with 2 decimals, ';' between (the bulk of a raw file; counted, not written, a block
+    of paths at a time)."""
     t, p = track.shape[:2]
-    return int(per_value.sum() + per_value[-1].sum() - p)
+    total = 0
+    for a in range(0, p, RAW_COUNT_PATHS):
+        c = np.rint(np.asarray(track[:, a:a + RAW_COUNT_PATHS], np.float64) * 100).astype(np.int64)
+        per_value = (_digits(np.abs(c) // 100) + 3 + (c < 0)).sum(axis=2) + 7 + 1  # numbers, M L L Z, commas, ';'
+        total += int(per_value.sum() + per_value[-1].sum())
+    return total - p
 
 
 def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.ndarray, dur: str,
@@ -411,9 +419,8 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
         keys = plan.keys
     else:
         keys = freeknots.point_keys(track, active, radius)
-    q = np.rint(keys.values[..., :6] * view_scale).astype(np.int64)
     pk, fk = np.nonzero(keys.mask.T)
-    rows = q.transpose(1, 0, 2)[pk, fk]
+    rows = np.rint(keys.values[fk, pk, :6] * view_scale).astype(np.int64)
     gain = plan.gain[pk] if plan is not None else 1.0  # local px -> output px
     decimals = key_time_decimals(t, key_slopes(keys.mask, rows, True) / view_scale * gain, time_budget)
     color_tol = COLOR_TOLERANCE

@@ -37,6 +37,20 @@ def test_point_keys_keep_the_euclidean_bound():
     assert within(err[active].max(), 0.25, x)
 
 
+def test_shapes_against_a_best_stop_early_with_the_same_keys():
+    """Tracks of a later shape give up once they cannot beat the best so far: the same keys as every shape
+    reduced in full and the fewest taken (ties to the earlier)."""
+    x, active = noisy_sines(n=60, noise=0.3)
+    first = freeknots.point_keys(x, active, 0.25, freeknots.SHAPES_DEG[:1])
+    full = first
+    for a in freeknots.SHAPES_DEG[1:]:
+        full = kf.fewest(full, freeknots.point_keys(x, active, 0.25, (a,)))
+    assert (full.mask.sum(axis=0) < first.mask.sum(axis=0)).any()  # the later shapes do win somewhere
+    early = freeknots.point_keys(x, active, 0.25, freeknots.SHAPES_DEG[1:], best=first)
+    assert np.array_equal(early.mask, full.mask) and np.array_equal(early.values, full.values)
+    assert np.array_equal(freeknots.point_keys(x, active, 0.25).mask, full.mask)
+
+
 def test_still_hidden_and_never_active_tracks():
     x = np.zeros((50, 3, 2))
     x[:, 0] += np.random.default_rng(1).uniform(-0.05, 0.05, (50, 2))  # jitter inside the bound: still
@@ -53,7 +67,7 @@ def test_still_hidden_and_never_active_tracks():
 def test_tracks_the_compiled_pass_rejects_get_sampled_keys(monkeypatch):
     x, active = noisy_sines(n=8)
 
-    def reject_all(x, active, eps, mask, values, bad, first, stop):
+    def reject_all(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
         bad[first:stop] = True
 
     monkeypatch.setattr(freeknots, "_reduce", reject_all)

@@ -1,0 +1,195 @@
+"""Conversion speed and memory at scale (issue 16): CPU seconds and peak RSS, beside a naive writer.
+
+Each case converts in a fresh child process (so its peak RSS is its own) with the default options: the
+capture-like face (bench/capture_like.py) and its longer and denser variants. Longer: the same generator with
+more frames. Denser: the 8k-triangle face split 1 -> 4 by edge midpoints (32k), twice (128k); the 2k face is
+the generator's own simplification. The naive writer (``naive_svg``, in its own child, after the same
+extraction) streams every kept triangle's coordinates at every frame with 2 decimals, numpy-formatted a block
+of paths at a time: ``--raw`` would be that writer, but it holds every string of the file at once (1.4 GB at
+8.5k triangles x 100 frames), which the long and dense cases cannot afford.
+
+FACESVG_BENCH_QUICK=1 runs only up to 1,000 frames and 32k triangles (the big cases cost minutes each).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from bench.capture_like import FRAMES, capture_like
+from converter.animation import FaceAnimation
+from converter.convert import convert_animation, extract_sheet
+from converter.options import ConversionOptions, Report
+from converter.outputs import output_kind
+
+TITLE = "Conversion speed and memory (issue 16)"
+QUICK = os.environ.get("FACESVG_BENCH_QUICK", "") not in ("", "0")
+# (label, frames, generator triangles, midpoint subdivisions)
+FRAME_CASES = ((100, 8000, 0), (FRAMES, 8000, 0), (1000, 8000, 0), (3000, 8000, 0))
+TRIANGLE_CASES = ((FRAMES, 2000, 0), (FRAMES, 8000, 0), (FRAMES, 8000, 1), (FRAMES, 8000, 2))
+QUICK_FRAMES, QUICK_TRIANGLES = 1000, 40000
+TARGETS = "capture-like <= 7 s CPU and <= 350 MB; writer >= 1 M triangle-frames/s; 8k x 3,000 <= 60 s and " \
+          "<= 2.5 GB; 128k x 336 <= 80 s and <= 4 GB; peak RSS <= 100 B per triangle-frame"
+
+
+def subdivided(anim: FaceAnimation, times: int) -> FaceAnimation:
+    """The animation with every triangle split into 4 at its edge midpoints, `times` times (parts kept)."""
+    if times == 0:
+        return anim
+    frames, faces, part_ids = anim.frames, anim.faces, anim.part_ids
+    for _ in range(times):
+        v = frames.shape[1]
+        edges = np.sort(np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1), axis=2)
+        uniq, inv = np.unique(edges.reshape(-1, 2), axis=0, return_inverse=True)
+        mid = (frames[:, uniq[:, 0]] + frames[:, uniq[:, 1]]) * np.float32(0.5)
+        frames = np.concatenate([frames, mid], axis=1)
+        m = (v + inv.reshape(-1, 3)).astype(np.int32)  # midpoints of edges 01, 12, 20
+        a, b, c = faces[:, 0], faces[:, 1], faces[:, 2]
+        faces = np.concatenate([np.column_stack([a, m[:, 0], m[:, 2]]), np.column_stack([m[:, 0], b, m[:, 1]]),
+                                np.column_stack([m[:, 2], m[:, 1], c]), m]).astype(np.int32)
+        part_ids = np.tile(part_ids, 4)
+    return FaceAnimation(frames, faces, part_ids, anim.parts, anim.fps, f"{anim.name}_x{4 ** times}",
+                         extras=dict(anim.extras))
+
+
+def face(frames: int, triangles: int, subdivisions: int) -> FaceAnimation:
+    """One benchmark face: the capture-like generator, then midpoint subdivisions."""
+    return subdivided(capture_like(n_frames=frames, triangles=triangles), subdivisions)
+
+
+def naive_svg(sheet, sink, block: int = 256) -> int:
+    """The naive animated SVG of a Sheet into sink(bytes): per kept triangle one path whose d holds every frame's
+    coordinates with 2 decimals (frame 0's fill); returns the bytes written."""
+    t = sheet.n_frames
+    dur = f"{sheet.duration:.3f}s"
+    rgb = np.clip(np.rint(sheet.face_rgb[0] * 255), 0, 255).astype(np.int64)
+    n = sink(f'<svg xmlns="http://www.w3.org/2000/svg" width="{sheet.camera.width}" '
+             f'height="{sheet.camera.height}">\n'.encode())
+    tris = np.asarray(sheet.order)
+    for a in range(0, len(tris), block):
+        tb = tris[a:a + block]
+        xy = np.round(sheet.xy[:, sheet.faces[tb]].reshape(t, len(tb), 6).astype(np.float64), 2)
+        vals = (("M%.2f,%.2fL%.2f,%.2fL%.2f,%.2fZ;" * (t * len(tb))) % tuple(xy.transpose(1, 0, 2).ravel().tolist()))
+        rows = vals.split("Z;")
+        parts = []
+        for j, tri in enumerate(tb.tolist()):
+            d = "Z;".join(rows[j * t:(j + 1) * t]) + "Z"
+            c = rgb[tri]
+            parts.append(f'<path fill="#{c[0]:02x}{c[1]:02x}{c[2]:02x}" d="{rows[j * t]}Z"><animate attributeName="d" '
+                         f'dur="{dur}" repeatCount="indefinite" values="{d}"/></path>\n')
+        n += sink("".join(parts).encode())
+    return n + sink(b"</svg>\n")
+
+
+def child(frames: int, triangles: int, subdivisions: int, mode: str) -> dict:
+    """Run in the child process: build the face, convert it (mode 'bounded', or 'naive': the same extraction
+    and naive_svg), report CPU (user+sys) and peak RSS."""
+    anim = face(frames, triangles, subdivisions)
+    before_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    if mode == "naive":
+        c = time.process_time()
+        sheet = extract_sheet(anim, ConversionOptions(), Report())
+        w = time.process_time()
+        size = naive_svg(sheet, len)
+        cpu = time.process_time() - c
+        return {"triangles": anim.n_faces, "frames": anim.n_frames, "cpu": cpu, "writer_cpu": cpu - (w - c),
+                "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "before_mb": before_mb,
+                "bytes": size}
+    kind = output_kind("svg")
+    flat = kind.shading_writers["flat"]
+    writer_cpu = [0.0]
+
+    def timed(*args, **kwargs):
+        c = time.process_time()
+        out = flat(*args, **kwargs)
+        writer_cpu[0] = time.process_time() - c
+        return out
+
+    kind.shading_writers["flat"] = timed
+    c = time.process_time()
+    result = convert_animation(anim, ConversionOptions())
+    cpu = time.process_time() - c
+    return {"triangles": anim.n_faces, "frames": anim.n_frames, "cpu": cpu, "writer_cpu": writer_cpu[0],
+            "extract_cpu": cpu - writer_cpu[0], "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+            "before_mb": before_mb, "bytes": len(result.data), "paths": result.report.counts.get("paths", 0)}
+
+
+def measure(frames: int, triangles: int, subdivisions: int, mode: str) -> dict:
+    """child(...) in a fresh interpreter."""
+    cmd = [sys.executable, str(Path(__file__).resolve()), "child", str(frames), str(triangles), str(subdivisions),
+           mode]
+    env = dict(os.environ, PYOPENGL_PLATFORM=os.environ.get("PYOPENGL_PLATFORM", "egl"))
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _exponent(x: list[float], y: list[float]) -> str:
+    if len(x) < 2:
+        return "n/a"
+    return f"{np.polyfit(np.log(x), np.log(y), 1)[0]:.2f}"
+
+
+def run() -> str:
+    frame_cases = [c for c in FRAME_CASES if not QUICK or c[0] <= QUICK_FRAMES]
+    tri_cases = [c for c in TRIANGLE_CASES if not QUICK or c[1] * 4 ** c[2] <= QUICK_TRIANGLES]
+    cases = list(dict.fromkeys(frame_cases + tri_cases))
+    res = {}
+    for case in cases:
+        res[case] = (measure(*case, "bounded"), measure(*case, "naive"))
+        print(case, res[case], flush=True)
+    rows = ["| case | triangles x frames | CPU s (convert) | of which writer | writer M tri-frames/s | peak RSS MB | "
+            "B per tri-frame | naive CPU s | naive peak MB | CPU vs naive | output MB (naive) |",
+            "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for case in cases:
+        b, r = res[case]
+        tf = b["triangles"] * b["frames"]
+        label = "capture-like face" if case == (FRAMES, 8000, 0) else f"{case[1] * 4 ** case[2] // 1000}k x {case[0]}"
+        rows.append(f"| {label} | {b['triangles']:,} x {b['frames']:,} | {b['cpu']:.1f} | {b['writer_cpu']:.1f} | "
+                    f"{tf / b['writer_cpu'] / 1e6:.2f} | {b['peak_mb']:,.0f} | {b['peak_mb'] * 2 ** 20 / tf:.0f} | "
+                    f"{r['cpu']:.1f} | {r['peak_mb']:,.0f} | {b['cpu'] / r['cpu']:.2f} | "
+                    f"{b['bytes'] / 1e6:.1f} ({r['bytes'] / 1e6:.1f}) |")
+    fx = [res[c][0]["frames"] for c in frame_cases]
+    tx = [res[c][0]["triangles"] for c in tri_cases]
+    grow = (f"Growth exponents (log-log fit of convert CPU): frames {_exponent(fx, [res[c][0]['cpu'] for c in frame_cases])}"
+            f" (8k triangles, {', '.join(map(str, fx))} frames); triangles "
+            f"{_exponent(tx, [res[c][0]['cpu'] for c in tri_cases])} ({', '.join(f'{t:,}' for t in tx)} triangles). "
+            f"Peak RSS: frames {_exponent(fx, [res[c][0]['peak_mb'] for c in frame_cases])}, triangles "
+            f"{_exponent(tx, [res[c][0]['peak_mb'] for c in tri_cases])}.")
+    skipped = [c for c in FRAME_CASES + TRIANGLE_CASES if c not in cases]
+    note = (f"Quick mode (FACESVG_BENCH_QUICK=1): not run: "
+            f"{', '.join(f'{c[1] * 4 ** c[2] // 1000}k x {c[0]}' for c in skipped)}. " if skipped else "")
+    return "\n".join([
+        "Default options (flat, bounded, rigid factoring on, 512 px) against the naive writer (`naive_svg`: the same "
+        "extraction, then every kept triangle's coordinates at every frame with 2 decimals, streamed). CPU is user+sys of the conversion inside a fresh child process (`time.process_time`, all "
+        "threads; the face's generation excluded), one run per case (not a median: the machine, 2 cores, was shared "
+        "with other engineers' jobs, so CPU figures are inflated by contention by an unknown amount). Peak RSS is the "
+        "child's `ru_maxrss`, which includes the interpreter, libraries and generating the face (the ICT head: "
+        f"~{res[cases[0]][0]['before_mb']:.0f} MB before converting). Writer M tri-frames/s = triangles x frames / "
+        "writer CPU.",
+        "",
+        *rows,
+        "",
+        grow,
+        "",
+        f"{note}The 4,000-frame ARKit-driven ICT face was not run. Targets (issue 16): {TARGETS}.",
+    ])
+
+
+if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "child":
+        os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+        f, t, s, mode = int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]
+        print(json.dumps(child(f, t, s, mode)))
+    else:
+        print(run())
