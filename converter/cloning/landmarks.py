@@ -18,7 +18,6 @@ the face when it would work turned (looking down -z, or z-up).
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import find_peaks
 from scipy.spatial import cKDTree
 
 from converter.animation import vertex_normals
@@ -60,12 +59,18 @@ def _filled(z: np.ndarray) -> np.ndarray:
     return np.interp(i, i[ok], z[ok])
 
 
+def _peaks(z: np.ndarray, prominence: float) -> np.ndarray:
+    """Indices of the local maxima of z that stand out by at least `prominence`."""
+    # scipy.signal costs ~0.9 s at import, half of `import converter.convert`: only landmark detection needs it.
+    from scipy.signal import find_peaks  # noqa: PLC0415 - heavy; loaded on first use to keep start-up fast
+
+    return find_peaks(z, prominence=prominence)[0]
+
+
 def _extremes(z: np.ndarray, prominence: float) -> tuple[np.ndarray, np.ndarray]:
     """Indices of local maxima and minima of a profile that stand out by at least `prominence`."""
     zf = _filled(z)
-    mx, _ = find_peaks(zf, prominence=prominence)
-    mn, _ = find_peaks(-zf, prominence=prominence)
-    return mx, mn
+    return _peaks(zf, prominence), _peaks(-zf, prominence)
 
 
 def _first_after(idx: np.ndarray, start: int, step: int) -> int | None:
@@ -150,7 +155,7 @@ def _detect(verts: np.ndarray, faces: np.ndarray) -> dict[str, np.ndarray]:
         # mesh's lower edge, so the chin does not depend on how much neck the mesh has; the window's top
         # keeps the chin on the same spot of a flat chin front on fine and coarse meshes.
         zf = _filled(zc)
-        big, _ = find_peaks(-zf, prominence=0.05 * height)
+        big = _peaks(-zf, 0.05 * height)
         i_throat = _first_after(big, i, -1)
         n_span = i_top - i if i_top is not None else SAMPLES // 4  # in samples: exact at any scale
         span = (ys[1] - ys[0]) * n_span
