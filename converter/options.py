@@ -116,6 +116,11 @@ class ConversionOptions:
                              unset="the last frame", advanced=True)
     tolerance: float = option(0.25, "largest vertex deviation in output pixels the encoder may add",
                               label="Tolerance (px)", minimum=0, exclusive_minimum=True, maximum=50, unit="px")
+    color_tolerance: float = option(255.0, "largest colour deviation (8-bit levels per channel) of the flat SVG; a "
+                                    "triangle whose shade stays within it gets one static colour. Animated colours "
+                                    "cost players most (bench_playback): the default 255 keeps every colour static, "
+                                    "3 animates the exact shading", label="Colour tolerance (levels)", minimum=0.6,
+                                    maximum=255, advanced=True)
     raw: bool = option(False, "write every frame, no keyframe reduction (the chapter's unoptimised encoding)",
                        label="Every frame, no keyframe reduction", advanced=True)
     max_triangles: int | None = option(None, "triangle budget (simplify once, shared by every frame)",
