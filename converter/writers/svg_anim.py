@@ -31,6 +31,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
+from converter import playcost
 from converter.encode import collapse, freeknots, groups
 from converter.encode import keys as keyframes
 from converter.encode.budget import ErrorBudget, viewbox_scale
@@ -288,6 +289,8 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
             f"<title>{escape(sheet.name)}</title>"]
     report.counts["paths"] = p
     if mode == "bounded":
+        report.figures["playback_ms_4x"] = playcost.predict_ms(report.counts)
+    if mode == "bounded":
         # The raw file's d values alone, counted exactly (writing them would cost more than this conversion).
         report.sizes["raw_d_values"] = raw_values_bytes(track)
     report.counts["depth_conflicts"] = dl.conflicts
@@ -543,6 +546,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     report.counts["static_paths"] = int((~moving).sum())
     report.counts["palette"] = len(palette)
     report.counts["color_animations"] = int(sum(1 for a in c_anims if a))
+    report.counts["animated_paths"] = int(sum(1 for a in d_anims if a))
     err = color_error(sheet.face_rgb[:, tris], active, palette[cls], c_vary, color_tol)
     report.figures["color_error_max_levels"] = float(err.max(initial=0.0))
     report.figures["color_error_p99_levels"] = float(np.percentile(err, 99)) if err.size else 0.0
