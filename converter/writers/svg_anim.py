@@ -228,7 +228,21 @@ def color_keys(rgb: np.ndarray, active: np.ndarray, tolerance: float) -> keyfram
         eps = max(tolerance - 0.5 - COLOR_TIME_LEVELS, 1e-6)  # rounding, keyTimes
         keys = freeknots.reduce_free(levels[:, rest], active[:, rest], eps)
         mask[:, rest] = keys.mask
-        values[:, rest] = np.clip(np.rint(keys.values), 0, 255)
+        values[:, rest] = np.rint(keys.values)
+        # A free key may lie outside 0..255 (extrapolated across hidden frames), where clipping would move the
+        # shown frames of its segment: those paths take keys on sampled values, or else every frame.
+        for fallback in (lambda c: keyframes.reduce(levels[:, c], active[:, c], eps), None):
+            clipped = np.flatnonzero((mask[..., None] & ((values < 0) | (values > 255))).any(axis=(0, 2)))
+            if not len(clipped):
+                break
+            if fallback is None:
+                mask[:, clipped] = True
+                values[:t, clipped] = np.rint(levels[:, clipped])
+                values[t, clipped] = values[t - 1, clipped]
+            else:
+                keys = fallback(clipped)
+                mask[:, clipped], values[:, clipped] = keys.mask, np.rint(keys.values)
+        values = np.clip(values, 0, 255)
     return keyframes.Keys(mask, values, first)
 
 
