@@ -1,8 +1,11 @@
 """Playback in Chromium (issue 18): frames per second under CPU throttling, as a document and as <img>.
 
-Files: the bundled sample (default, Gouraud, mobile preset) and the capture-like face (default, mobile preset).
-Each is opened from a loopback server as a document and inside an <img>, at 1x, 4x and 6x CPU throttling
-(DevTools Emulation.setCPUThrottlingRate: 4x and 6x stand in for a mid-range and a low-end phone).
+Files: the bundled sample (default, mobile preset) and the capture-like face (default, mobile preset, and the
+mobile preset with exact colours, --color-tolerance 3, which costs a colour animation per path). Gouraud is left
+out to keep the section near ten minutes (its 5 MB sample file alone loads for minutes at 6x). Each is
+opened from a loopback server as a document and inside an <img>, at 1x, 4x and 6x CPU throttling (DevTools
+Emulation.setCPUThrottlingRate: 4x and 6x stand in for a mid-range and a low-end phone). One run per cell on a
+shared 2-core machine: cells scatter by about +-40 %.
 """
 
 from __future__ import annotations
@@ -20,27 +23,38 @@ if str(ROOT) not in sys.path:
 from bench.capture_like import capture_like
 from bench.playback import chromium, host_page, measure, serve
 from converter.convert import convert, convert_animation
-from converter.options import ConversionOptions
+from converter.options import ConversionOptions, Report
+from converter.playcost import playback_class
 
 TITLE = "Playback in Chromium under CPU throttling (issue 18)"
 SAMPLE = ROOT / "samples" / "face.glb"
 THROTTLES = (1, 4, 6)
-SECONDS = 5.0
-MOBILE = {"max_triangles": 1500, "size": 256}
+SECONDS = 3.0
+MOBILE = {"preset": "mobile"}
+EXACT_COLOURS = {"color_tolerance": 3.0}
 
 
-def outputs() -> list[tuple[str, bytes, int]]:
-    """(label, svg bytes, viewport px) for every file measured."""
+def outputs() -> list[tuple[str, bytes, int, Report]]:
+    """(label, svg bytes, viewport px, report) for every file measured."""
     out = []
-    for label, opts in (("sample, default", {}), ("sample, gouraud", {"shading": "gouraud"}),
-                        ("sample, mobile preset", MOBILE)):
+    for label, opts in (("sample, default", {}), ("sample, mobile preset", MOBILE)):
         options = ConversionOptions(**opts)
-        out.append((label, convert(SAMPLE, options).data, options.size))
+        result = convert(SAMPLE, options)
+        out.append((label, result.data, options.size, result.report))
     anim = capture_like()
-    for label, opts in (("capture-like, default", {}), ("capture-like, mobile preset", MOBILE)):
+    for label, opts in (("capture-like, default", {}), ("capture-like, mobile preset", MOBILE),
+                        ("capture-like, mobile preset, exact colours", {**MOBILE, **EXACT_COLOURS})):
         options = ConversionOptions(**opts)
-        out.append((label, convert_animation(anim, options).data, options.size))
+        result = convert_animation(anim, options)
+        out.append((label, result.data, options.size, result.report))
     return out
+
+
+def _colour(report: Report) -> str:
+    f = report.figures
+    if "color_error_max_levels" not in f:
+        return "exact"
+    return f"{f['color_error_max_levels']:.0f} / {f['color_error_p99_levels']:.0f}"
 
 
 def run() -> str:
@@ -48,28 +62,37 @@ def run() -> str:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         files = outputs()
-        for i, (_, data, size) in enumerate(files):
+        for i, (_, data, size, _) in enumerate(files):
             (folder / f"f{i}.svg").write_bytes(data)
             (folder / f"f{i}.html").write_text(host_page(f"f{i}.svg", size))
         with serve(folder) as base, chromium() as browser:
-            for i, (label, data, size) in enumerate(files):
+            for i, (label, data, size, report) in enumerate(files):
                 paths = len(re.findall(rb"<path", data))
+                animated = len(re.findall(rb"<animate\b", data))
+                ms = report.figures.get("playback_ms_4x")
+                predicted = f"{ms:.0f} ({playback_class(ms)})" if ms is not None else "-"
                 for mode, url in (("document", f"{base}/f{i}.svg"), ("<img>", f"{base}/f{i}.html")):
                     cells = [measure(browser, url, size, rate, SECONDS) for rate in THROTTLES]
                     rows.append(
-                        f"| {label} | {paths:,} | {len(data) / 1024:,.0f} / {len(gzip.compress(data, 9, mtime=0)) / 1024:,.0f} "
-                        f"| {mode} | " + " / ".join(f"{c.fps_raf:.1f}" for c in cells)
+                        f"| {label} | {paths:,} / {animated:,} | {len(data) / 1024:,.0f} / "
+                        f"{len(gzip.compress(data, 9, mtime=0)) / 1024:,.0f} | {_colour(report)} | {mode} | "
+                        + " / ".join(f"{c.fps_raf:.1f}" for c in cells)
                         + " | " + " / ".join(f"{c.fps_changed:.1f}" for c in cells)
                         + " | " + " / ".join(f"{c.main_ms:.0f}" for c in cells)
-                        + f" | {cells[0].first_frame_ms:,.0f} | {max(c.renderer_mb for c in cells):,.0f} |"
+                        + f" | {predicted} | {cells[0].first_frame_ms:,.0f} | {max(c.renderer_mb for c in cells):,.0f} |"
                     )
     head = (
-        f"Each cell: {SECONDS:.0f} s of playback after load, one run per throttling rate (1x / 4x / 6x). "
-        "fps rAF = requestAnimationFrame callbacks per second; fps changed = screencast frames whose pixels "
-        "changed per second (inside `<img>` the host page's rAF overstates playback); main ms = main-thread task "
-        "time per rAF frame (Performance.getMetrics TaskDuration); first frame = navigation start to the first "
-        "animation frame after load, at 1x; renderer MB = resident memory of the renderer processes.\n\n"
-        "| output | paths | KB / gzip KB | as | fps rAF 1x / 4x / 6x | fps changed | main ms/frame | first frame ms | renderer MB |\n"
-        "|---|---|---|---|---|---|---|---|---|\n"
+        f"Each cell: {SECONDS:.0f} s of playback after load, one run per throttling rate (1x / 4x / 6x), on a "
+        "2-core machine shared with other jobs (cells scatter by about +-40 %). paths / animations = `<path>` "
+        "and `<animate>` elements; colour error = max / 99th percentile 8-bit levels of the played flat colours "
+        "against the exact shade (animated paths count their tolerance); fps rAF = requestAnimationFrame "
+        "callbacks per second; fps changed = screencast frames whose pixels changed per second (inside `<img>` "
+        "the host page's rAF overstates playback); main ms = main-thread task time per rAF frame "
+        "(Performance.getMetrics TaskDuration); predicted = converter.playcost's ms per frame at 4x and its "
+        "class; first frame = navigation start to the first animation frame after load, at 1x; renderer MB = "
+        "resident memory of the renderer processes.\n\n"
+        "| output | paths / animations | KB / gzip KB | colour error | as | fps rAF 1x / 4x / 6x | fps changed "
+        "| main ms/frame | predicted ms at 4x | first frame ms | renderer MB |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
     return head + "\n".join(rows) + "\n"

@@ -5,9 +5,10 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, fields
-from typing import Any
+from typing import Any, NamedTuple
 
 from converter.errors import InputError
+from converter.playcost import playback_class
 
 SHADINGS = {
     "flat": "Flat (smallest)",
@@ -18,6 +19,22 @@ CLONE_METHODS = {
     "dense": "Dense (whole face)",
     "example": "Example-based (key models)",
     "frames": "Local frames",
+}
+
+
+
+class Preset(NamedTuple):
+    """A named set of option values (CLI --preset, the web form's preset buttons, the API's preset field)."""
+
+    label: str
+    values: Mapping[str, Any]
+    description: str
+
+
+# Tuned by bench_playback (the capture-like face in Chromium under 4x CPU throttling, issue 18).
+PRESETS = {
+    "mobile": Preset("Mobile", {"size": 256, "max_triangles": 1000, "tolerance": 0.5},
+                     "256 px, at most 1000 triangles, 0.5 px tolerance: a light file for phones"),
 }
 
 Progress = Callable[[str, float], None]
@@ -87,6 +104,10 @@ def option(default, help: str, **meta):
 class ConversionOptions:
     """Every conversion knob, with defaults that give a good result."""
 
+    preset: str | None = option(None, "a named set of option values; options left at their default take the "
+                                "preset's: " + "; ".join(f"{k}: {p.description}" for k, p in PRESETS.items()),
+                                label="Preset", choices={k: p.label for k, p in PRESETS.items()}, unset="none",
+                                form=False)
     to: str = option("svg", "the kind of file to write", label="Output kind", output_kinds=True)
     shading: str = option("flat", "how triangles are filled: flat colours, or exact (gouraud) or the chapter's "
                           "three-gradient (gouraud-chapter) smooth shading", label="Shading", choices=SHADINGS)
@@ -116,6 +137,11 @@ class ConversionOptions:
                              unset="the last frame", advanced=True)
     tolerance: float = option(0.25, "largest vertex deviation in output pixels the encoder may add",
                               label="Tolerance (px)", minimum=0, exclusive_minimum=True, maximum=50, unit="px")
+    color_tolerance: float = option(255.0, "largest colour deviation (8-bit levels per channel) of the flat SVG; a "
+                                    "triangle whose shade stays within it gets one static colour. Animated colours "
+                                    "cost players most (bench_playback): the default 255 keeps every colour static, "
+                                    "3 animates the exact shading", label="Colour tolerance (levels)", minimum=0.6,
+                                    maximum=255, advanced=True)
     raw: bool = option(False, "write every frame, no keyframe reduction (the chapter's unoptimised encoding)",
                        label="Every frame, no keyframe reduction", advanced=True)
     max_triangles: int | None = option(None, "triangle budget (simplify once, shared by every frame)",
@@ -147,6 +173,11 @@ class ConversionOptions:
                                  accept=".csv,.json", advanced=True)
 
     def __post_init__(self) -> None:
+        if self.preset is not None and self.preset in PRESETS:
+            defaults = {f.name: f.default for f in fields(self)}
+            for name, value in PRESETS[self.preset].values.items():
+                if getattr(self, name) == defaults[name]:
+                    object.__setattr__(self, name, value)
         for spec in option_fields():
             value = getattr(self, spec.name)
             if value is not None:
@@ -246,6 +277,8 @@ class Report:
             f"{s.get('output', 0) / 1024:.1f} KB",
             f"{sum(self.timings.values()):.2f} s",
         ]
+        if "playback_ms_4x" in self.figures:
+            parts.append(playback_class(self.figures["playback_ms_4x"]))
         if "max_deviation_px" in self.figures:
             parts.append(f"max deviation {self.figures['max_deviation_px']:.3f} px")
         return ", ".join(parts)

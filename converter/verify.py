@@ -9,6 +9,9 @@ projects every frame with the metadata camera and measures, for every vertex of 
 (t = k / fps), its distance in output pixels from the exact projection, and for every triangle in the file
 the frames where it is drawn although culled or hidden although visible.
 
+A triangle collapsed to one point (the bounded encoding's way to hide it) counts as hidden, unless the exact
+triangle is visible and lies within the tolerance of that point (a triangle below the tolerance may be keyed
+to a point; it is then measured like any drawn one).
 SMIL support: <animate> of ``d``, ``class``, ``visibility`` and ``display`` with values, keyTimes (or even
 spacing), calcMode linear or discrete, dur, repeatCount; a static ``transform`` on the path and its ancestors and
 <animateTransform> (translate, scale, rotate, matrix-free forms) on ancestor groups; viewBox scaling.
@@ -75,6 +78,7 @@ class Evaluated:
     triangles: np.ndarray  # int (P,)
     xy: np.ndarray  # float64 (T, P, 3, 2) in viewport pixels
     shown: np.ndarray  # bool (T, P)
+    collapsed: np.ndarray | None = None  # bool (T, P): hidden by being a point (else by class/display/visibility)
 
 
 def read_svg(data: bytes) -> etree._Element:
@@ -305,6 +309,11 @@ def _group_matrices(g: etree._Element, times: np.ndarray) -> np.ndarray:
     return acc
 
 
+def collapsed(xy: np.ndarray) -> np.ndarray:
+    """Bool (T,) of triangles (T, 3, 2): all three vertices at one point (drawn as nothing: hidden)."""
+    return (xy == xy[:, :1]).all(axis=(1, 2))
+
+
 def evaluate(data: bytes) -> Evaluated:
     """Evaluate every triangle path of a facesvg SVG (or player file) at the frame times k / fps."""
     if player.is_player(data):  # the player's block decoded by its own reader
@@ -322,7 +331,7 @@ def evaluate(data: bytes) -> Evaluated:
     sx, sy = width / vb[2], height / vb[3]
     view = np.array([[sx, 0, -vb[0] * sx], [0, sy, -vb[1] * sy], [0, 0, 1]])
     hidden_classes = _hidden_classes(root)
-    tris, xys, shown = [], [], []
+    tris, xys, shown, points = [], [], [], []
     group_cache: dict[etree._Element, tuple[np.ndarray, np.ndarray]] = {}  # keyed by element: id() of a freed
     # lxml proxy is reused by the next one, which handed nested groups another group's transform
     for el in root.iter(f"{SVG_NS}path"):
@@ -330,6 +339,7 @@ def evaluate(data: bytes) -> Evaluated:
         if not m:
             continue
         xy = _path_xy(el, times).reshape(len(times), 3, 2)
+        point = collapsed(xy)
         vis = _shown(el, times, hidden_classes)
         mat = np.broadcast_to(view, (len(times), 3, 3))
         for anc in reversed(list(el.iterancestors(f"{SVG_NS}g"))):
@@ -345,10 +355,11 @@ def evaluate(data: bytes) -> Evaluated:
         xy = np.einsum("tij,tvj->tvi", mat[:, :2, :2], xy) + mat[:, None, :2, 2]
         tris.append(int(m.group(1)))
         xys.append(xy)
-        shown.append(vis)
+        shown.append(vis & ~point)
+        points.append(vis & point)
     if not tris:
         raise InputError("the SVG has no triangle paths (id f<number>); only facesvg output can be verified.")
-    return Evaluated(meta, np.array(tris), np.stack(xys, axis=1), np.stack(shown, axis=1))
+    return Evaluated(meta, np.array(tris), np.stack(xys, axis=1), np.stack(shown, axis=1), np.stack(points, axis=1))
 
 
 def compare(ev: Evaluated, exact_xy: np.ndarray, expected_visible: np.ndarray, faces: np.ndarray,
@@ -362,7 +373,11 @@ def compare(ev: Evaluated, exact_xy: np.ndarray, expected_visible: np.ndarray, f
     exact = exact_xy[:, faces[ev.triangles]]  # (T, P, 3, 2)
     dist = np.linalg.norm(ev.xy - exact, axis=-1)  # (T, P, 3)
     dist = np.where(np.isnan(dist), np.inf, dist)
-    drawn = ev.shown[..., None] & np.ones(3, bool)
+    shown = ev.shown
+    if ev.collapsed is not None:  # a visible triangle smaller than the tolerance may be drawn as its point
+        small = ev.collapsed & expected_visible[:, ev.triangles] & (dist <= tolerance).all(axis=-1)
+        shown = shown | small
+    drawn = shown[..., None] & np.ones(3, bool)
     d = dist[drawn]
     worst: dict[str, Any] = {}
     if d.size:
@@ -370,7 +385,7 @@ def compare(ev: Evaluated, exact_xy: np.ndarray, expected_visible: np.ndarray, f
         worst = {"frame": int(k), "triangle": int(ev.triangles[p]), "vertex": int(v), "px": float(dist[k, p, v])}
     tri_ids = np.unique(ev.triangles)
     drawn_tri = np.zeros((t, len(faces)), bool)
-    np.logical_or.at(drawn_tri.T, ev.triangles, ev.shown.T)
+    np.logical_or.at(drawn_tri.T, ev.triangles, shown.T)
     wrong = drawn_tri[:, tri_ids] != expected_visible[:, tri_ids]
     absent = np.ones(len(faces), bool)
     absent[tri_ids] = False
@@ -401,7 +416,7 @@ def verify_animation(data: bytes, anim, tolerance: float | None = None) -> Verif
         k = int(encoding.get("frame", 0))
         if not 0 <= k < anim.n_frames or ev.xy.shape[0] != anim.n_frames:
             raise InputError("the still's frame is not in the input; pass the input it was made from.")
-        ev = Evaluated(ev.meta, ev.triangles, ev.xy[k:k + 1], ev.shown[k:k + 1])
+        ev = Evaluated(ev.meta, ev.triangles, ev.xy[k:k + 1], ev.shown[k:k + 1], ev.collapsed[k:k + 1])
         xy, visible = xy[k:k + 1], visible[k:k + 1]
     return compare(ev, xy, visible, anim.faces, tol)
 

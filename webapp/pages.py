@@ -9,6 +9,7 @@ from flask import Blueprint, abort, current_app, flash, g, redirect, render_temp
 from converter.errors import InputError
 from converter.options import option_fields
 from converter.outputs import choices, output_files
+from converter.playcost import playback_class
 from webapp.eta import standing
 from webapp.jobstore import DONE
 from webapp.messages import user_words
@@ -160,7 +161,14 @@ def job_page(job_id: str):
     labels = {**{key: f.label for key, f in output_files().items()}, "report": "Report (JSON)"}
     return render_template("job.html", job=job, kinds=kinds, labels=labels, standing=standing(queue(), job),
                            error=user_words(job.message) if job.message else "",
-                           estimates=estimate_sizes(job) if job.state == DONE else [])
+                           estimates=estimate_sizes(job) if job.state == DONE else [], playback=_playback(job))
+
+
+def _playback(job) -> str:
+    """The playback class of a finished flat SVG job ('' when its report has no prediction)."""
+    figures = ((job.result or {}).get("report") or {}).get("figures") or {}
+    ms = figures.get("playback_ms_4x")
+    return playback_class(ms) if isinstance(ms, (int, float)) else ""
 
 
 @pages.post("/jobs/<job_id>/delete")

@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
+from converter.options import PRESETS
 from webapp.jobstore import Job
 
-# name -> (label, option overrides, one-line description); the form's preset buttons set these fields.
-PRESETS = {
-    "mobile": ("Mobile", {"size": 256, "max_triangles": 1500},
-               "256 px, at most 1500 triangles: a light file that plays smoothly on phones"),
-}
+__all__ = ["PRESETS", "estimate_sizes"]  # name -> (label, option values, description): the form's preset buttons
 
 
 def estimate_sizes(job: Job) -> list[dict]:

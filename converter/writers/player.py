@@ -11,7 +11,7 @@ compact binary block and plays it with a small script (converter/writers/player.
   applied once when the player expands the keys), their radius divided by its largest magnification;
 - per path (the SVG's drawing order, converter.encode.order.draw_list) its triangle's vertices and its
   visibility as change frames;
-- colours keyed like the SVG's (svg_anim.color_keys within svg_anim.COLOR_TOLERANCE levels): per path for
+- colours keyed like the SVG's (svg_anim.color_keys within COLOR_LEVELS levels): per path for
   flat shading, per vertex for Gouraud (WebGL interpolates vertex colours linearly: exact Gouraud).
 
 Frame k shows at t = k / fps; between frames the player interpolates linearly, as SMIL does; the last key
@@ -54,6 +54,7 @@ FLAG_GOURAUD = 1  # colour tracks per vertex (else per path)
 FLAG_WIDE = 2  # position values are int32 (else int16)
 FLAG_HEAD = 4  # positions are local to a per-frame head transform (last section: float32 (T + 1, 2, 3))
 BYTES_PER_KEY = 2.5  # deflated bytes of a position key (capture-like), against the head transform's float32s
+COLOR_LEVELS = 3.0  # colour keys within this many 8-bit levels (the SVG's exact colours): colour costs the GPU nothing
 MAX_FRAMES = 65534  # key frames are uint16 (frame T, the loop end, included)
 MAX_EXPANDED = 1 << 27  # numbers the player may expand (frames x tracks x coordinates) before it refuses
 DATA_ID = "facesvg-data"
@@ -120,27 +121,10 @@ def _vertex_active(active: np.ndarray, path_vertices: np.ndarray, n_vertices: in
 
 
 def _color_keys(rgb: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Colour tracks (T, N, 3) 0..1 keyed like the SVG's (svg_anim.color_keys), packed. A key value beyond
-    0..255 is clipped there, which can break the bound: such tracks get keys on sampled values, and any track
-    still out of bound a key at every frame (exact to rounding)."""
-    t, n = rgb.shape[:2]
-    levels = np.asarray(rgb, np.float64) * 255
-    ck = svg_anim.color_keys(rgb, active, svg_anim.COLOR_TOLERANCE)
-    mask, values = ck.mask.copy(), ck.values.copy()
-    for fallback in ("sampled", "every frame"):
-        track, fk, vals = _unpack_keys(*_pack_keys(mask, values), t)
-        err = np.abs(_expand(track, fk, vals.astype(np.float64), n, t)[:t] - levels).max(axis=-1)
-        bad = (np.where(active, err, 0.0) > svg_anim.COLOR_TOLERANCE).any(axis=0)
-        if not bad.any():
-            break
-        if fallback == "sampled":
-            fb = keyframes.reduce(levels[:, bad], active[:, bad], svg_anim.COLOR_TOLERANCE - 0.5 - 1e-6)
-            mask[:, bad], values[:, bad] = fb.mask, np.clip(np.rint(fb.values), 0, 255)
-        else:
-            mask[:, bad] = True
-            values[:t, bad] = np.rint(levels[:, bad])
-            values[t, bad] = values[t - 1, bad]
-    return _pack_keys(mask, values)
+    """Colour tracks (T, N, 3) 0..1 keyed like the SVG's exact colours (svg_anim.color_keys within
+    COLOR_LEVELS levels, its bound kept where keys fall outside 0..255), packed."""
+    ck = svg_anim.color_keys(rgb, active, COLOR_LEVELS)
+    return _pack_keys(ck.mask, ck.values)
 
 
 def _changes(active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -261,7 +245,7 @@ def metadata(sheet: Sheet, options: ConversionOptions, scale: int) -> dict:
         "options": options.to_json(),
         "counts": {k: v for k, v in sheet.info.items() if isinstance(v, int)},
         "encoding": {"mode": "player", "scale": scale, "tolerance": options.tolerance,
-                     "color_levels": svg_anim.COLOR_TOLERANCE},
+                     "color_levels": COLOR_LEVELS},
     }
 
 

@@ -11,9 +11,12 @@ Three encodings of the same document structure:
   options.tolerance px of the exact projection at every frame where the triangle is visible
   (converter.encode.freeknots: greedy keys with free values and keyTimes, or evenly spaced keys without them
   where that is shorter); integer coordinates in a viewBox scaled so rounding is part of the same budget;
-  relative path syntax; static triangles without <animate>; fill and stroke are currentColor, the colour
-  keyed linearly within COLOR_TOLERANCE levels and its first value a shared CSS class; visibility a discrete
-  class animation (the hidden class sets display:none); never-visible triangles dropped.
+  relative path syntax; static triangles without <animate>; fill and stroke are currentColor, a shared CSS
+  class per colour; a triangle whose shade stays within options.color_tolerance levels of one colour is that
+  static colour (the default keeps every colour static: a colour animation restyles its path at every frame
+  and costs players far more than a d animation, bench_playback), others keyed linearly within it; hidden
+  frames folded into the d animation (converter.encode.collapse: the triangle collapses to a point within the
+  half frame before it hides), so a path has at most a d and a color <animate>; never-visible triangles dropped.
 
 Frame k shows at t = k / fps; dur = T / fps; linear animations end with a key at keyTime 1 (the loop end).
 Every static attribute (group transform, d, colour class, display) holds frame 0 as played, so a renderer
@@ -28,7 +31,8 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from converter.encode import freeknots, groups
+from converter import playcost
+from converter.encode import collapse, freeknots, groups
 from converter.encode import keys as keyframes
 from converter.encode.budget import ErrorBudget, viewbox_scale
 from converter.encode.order import draw_list
@@ -41,12 +45,10 @@ from converter.writers.svgtext import number as svg_number
 
 FORMAT_VERSION = 2
 STROKE_PX = 0.5  # stroke of the fill colour hides anti-aliasing seams between neighbours
-COLOR_TOLERANCE = 3.0  # 8-bit levels per channel a shown colour may differ from the exact flat shade
 COLOR_TIME_LEVELS = 0.1  # of which rounding the colour keyTimes may take
 COLOR_SLACK = 0.05  # levels kept free of evenly spaced colour keys (checked exactly, rounding included)
 BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime): what groups weigh
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
-HIDDEN_CLASS = "h"
 RAW_COUNT_PATHS = 1024  # paths per block when counting the raw encoding's bytes
 
 
@@ -136,7 +138,7 @@ def _style(palette: np.ndarray, scale: int) -> str:
     rules = "".join(f".c{i}{{color:{c}}}" for i, c in enumerate(_hex(palette).tolist()))
     sw = svg_number(STROKE_PX * scale, 3)
     return (f"<style>path{{fill:currentColor;stroke:currentColor;stroke-width:{sw};stroke-linejoin:round}}"
-            f".{HIDDEN_CLASS}{{display:none}}{rules}</style>")
+            f"{rules}</style>")
 
 
 def write_still(sheet: Sheet, options: ConversionOptions, report: Report, frame: int) -> bytes:
@@ -210,12 +212,48 @@ def _raw_strings(tri_xy: np.ndarray) -> list[str]:
 
 def color_keys(rgb: np.ndarray, active: np.ndarray, tolerance: float) -> keyframes.Keys:
     """Colour (T, P, 3) in 0..1 as linear keys within tolerance 8-bit levels per channel where shown (values
-    rounded to integer levels, which the tolerance includes)."""
+    rounded to integer levels, which the tolerance includes). A path whose shown colours all lie within the
+    tolerance of their mid-range is one static colour (two equal keys)."""
     levels = np.asarray(rgb, np.float64) * 255
-    eps = max(tolerance - 0.5 - COLOR_TIME_LEVELS, 1e-6)  # rounding, keyTimes
-    keys = freeknots.reduce_free(levels, active, eps)
-    q = np.clip(np.rint(keys.values), 0, 255)
-    return keys._replace(values=q)
+    t, p = active.shape
+    lo = np.where(active[..., None], levels, np.inf).min(axis=0)
+    hi = np.where(active[..., None], levels, -np.inf).max(axis=0)
+    flat = ((hi - lo).max(axis=-1, initial=0.0) / 2 + 0.5 <= tolerance) & active.any(axis=0)
+    mask = np.zeros((t + 1, p), bool)
+    values = np.zeros((t + 1, p, 3))
+    mask[[0, t]] = flat
+    values[[0, t]] = np.where(flat[:, None], np.rint((lo + hi) / 2), 0.0)
+    first = np.where(active.any(axis=0), np.argmax(active, axis=0), -1)
+    rest = np.flatnonzero(~flat)
+    if len(rest):
+        eps = max(tolerance - 0.5 - COLOR_TIME_LEVELS, 1e-6)  # rounding, keyTimes
+        keys = freeknots.reduce_free(levels[:, rest], active[:, rest], eps)
+        mask[:, rest] = keys.mask
+        values[:, rest] = np.rint(keys.values)
+        # A free key may lie outside 0..255 (extrapolated across hidden frames), where clipping would move the
+        # shown frames of its segment: those paths take keys on sampled values, or else every frame.
+        for fallback in (lambda c: keyframes.reduce(levels[:, c], active[:, c], eps), None):
+            clipped = np.flatnonzero((mask[..., None] & ((values < 0) | (values > 255))).any(axis=(0, 2)))
+            if not len(clipped):
+                break
+            if fallback is None:
+                mask[:, clipped] = True
+                values[:t, clipped] = np.rint(levels[:, clipped])
+                values[t, clipped] = values[t - 1, clipped]
+            else:
+                keys = fallback(clipped)
+                mask[:, clipped], values[:, clipped] = keys.mask, np.rint(keys.values)
+        values = np.clip(values, 0, 255)
+    return keyframes.Keys(mask, values, first)
+
+
+def color_error(rgb: np.ndarray, active: np.ndarray, static: np.ndarray, animated: np.ndarray,
+                tolerance: float) -> np.ndarray:
+    """Per shown (frame, path) the largest channel error in levels of a path's static colour (P, 3) against the
+    exact shade rgb (T, P, 3) in 0..1; an animated path counts its tolerance (its bound, not evaluated)."""
+    err = np.abs(np.asarray(rgb, np.float64) * 255 - static[None]).max(axis=-1)
+    err[:, animated] = tolerance
+    return err[active]
 
 
 def _discrete(attribute: str, codes: np.ndarray, names: list[str], kt: list[str], dur: str) -> list[str]:
@@ -262,11 +300,14 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
         body = _encode_raw(sheet, tris, active, track, dur, chapter=mode == "chapter")
         scale = 1
     else:
-        body, scale, enc = _encode_keyed(sheet, budget, tris, active, track, dur, report, plan)
+        body, scale, enc = _encode_keyed(sheet, budget, tris, active, track, dur, report, plan,
+                                         options.color_tolerance)
         extra["encoding"].update(enc)
     head = [_header(sheet, scale), metadata(sheet, options, report, extra, order=tris),
             f"<title>{escape(sheet.name)}</title>"]
     report.counts["paths"] = p
+    if mode == "bounded":
+        report.figures["playback_ms_4x"] = playcost.predict_ms(report.counts)
     if mode == "bounded":
         # The raw file's d values alone, counted exactly (writing them would cost more than this conversion).
         report.sizes["raw_d_values"] = raw_values_bytes(glob)
@@ -308,7 +349,7 @@ def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.nd
         pk, fk = np.nonzero(keys.mask.T)
         text = _raw_strings(keys.values.transpose(1, 0, 2)[pk, fk] / 100.0)
         bounds = np.searchsorted(pk, np.arange(p + 1)).tolist()
-        moving = _varying(keys.mask, keys.values.transpose(1, 0, 2)[pk, fk])
+        moving = _varying(pk, p, keys.values.transpose(1, 0, 2)[pk, fk])
         kt_lin = key_times(np.arange(t + 1), t, 6)
         fkl = fk.tolist()
     out = ['<g stroke-width="0.5" stroke-linejoin="round">']
@@ -333,12 +374,10 @@ def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.nd
     return out
 
 
-def _linear(attribute: str, mask: np.ndarray, text: list[str], kt_text: list[str], dur: str,
+def _linear(attribute: str, pk: np.ndarray, p: int, text: list[str], kt_text: list[str], dur: str,
             animate: np.ndarray) -> tuple[list[str], list[str], int]:
-    """Per path a linear <animate> through its keys (mask (T+1, P); value and keyTimes texts path-major)
-    where animate[j]."""
-    t1, p = mask.shape
-    pk, fk = np.nonzero(mask.T)
+    """Per path a linear <animate> through its keys (pk: the path of each key, sorted; value and keyTimes texts
+    path-major) where animate[j]."""
     bounds = np.searchsorted(pk, np.arange(p + 1)).tolist()
     out, first, n = [""] * p, [""] * p, 0
     for j in range(p):
@@ -355,10 +394,8 @@ def _linear(attribute: str, mask: np.ndarray, text: list[str], kt_text: list[str
     return out, first, n
 
 
-def _varying(mask: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """Bool (P,): the key rows (path-major, (K, D)) of a path are not all equal."""
-    p = mask.shape[1]
-    pk = np.nonzero(mask.T)[0]
+def _varying(pk: np.ndarray, p: int, rows: np.ndarray) -> np.ndarray:
+    """Bool (P,): the key rows (path-major, (K, D); pk the path of each) of a path are not all equal."""
     bounds = np.searchsorted(pk, np.arange(p + 1))
     counts = np.diff(bounds)
     out = np.zeros(p, bool)
@@ -404,9 +441,44 @@ def _uniform_instead(attribute: str, track: np.ndarray, active: np.ndarray, coun
     return values
 
 
+def timeline_key_times(tl: collapse.Timeline, rows: np.ndarray, t: int, px: float | np.ndarray,
+                       budget: float) -> tuple[list[str], np.ndarray]:
+    """keyTimes text of a collapse.Timeline's keys (rows: their integer values, px: px per unit) and the
+    decimals of each: rounded within budget px on the segments a key bounds, in the direction its snap allows
+    (then twice the distance), never across the half frame that separates it from a collapse."""
+    pk, half = tl.path, tl.half
+    k = len(pk)
+    slope = np.zeros(k)
+    bare = np.zeros(k)  # the same without the collapse segments
+    if k > 1:
+        same = pk[1:] == pk[:-1]
+        dv = np.diff(rows.astype(np.float64), axis=0)
+        step = np.linalg.norm(dv.reshape(len(dv), -1, 2), axis=-1).max(axis=1) * np.broadcast_to(px, (k,))[:-1]
+        seg = np.where(same, step / np.maximum(np.diff(half), 1) * 2, 0.0)  # per frame
+        plain = np.where(tl.collapsed[1:] | tl.collapsed[:-1], 0.0, seg)
+        slope[:-1] = seg
+        slope[1:] = np.maximum(slope[1:], seg)
+        bare[:-1] = plain
+        bare[1:] = np.maximum(bare[1:], plain)
+    snap = tl.snap
+    near_collapse = (snap != 0) | tl.collapsed
+    use = np.where(snap == -2, slope, np.where(np.abs(snap) == 1, 2 * bare, bare))
+    decimals = key_time_decimals(t, use, budget)
+    if t > 1:  # a key next to a collapse keeps to its quarter of a frame
+        decimals = np.where(near_collapse, np.maximum(decimals, math.ceil(math.log10(8 * t))), decimals)
+    out = np.empty(k, object)
+    for code, mode in ((-1, "floor"), (1, "ceil"), (0, "nearest"), (-2, "nearest")):
+        sel = snap == code
+        if sel.any():
+            out[sel] = key_times(half[sel], 2 * t, decimals[sel], mode)
+    return out.tolist(), decimals
+
+
 def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: np.ndarray, track: np.ndarray,
-                  dur: str, report: Report, plan: groups.Plan | None = None) -> tuple[list[str], int, dict]:
-    """The error-bounded integer encoding (module docstring) within budget; plan: rigid groups (local tracks)."""
+                  dur: str, report: Report, plan: groups.Plan | None = None,
+                  color_tolerance: float = 3.0) -> tuple[list[str], int, dict]:
+    """The error-bounded integer encoding (module docstring) within budget; plan: rigid groups (local tracks);
+    colours within color_tolerance levels."""
     t, p = active.shape
     tol = budget.tolerance
     view_scale = budget.scale
@@ -419,22 +491,24 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
         keys = plan.keys
     else:
         keys = freeknots.point_keys(track, active, radius)
-    pk, fk = np.nonzero(keys.mask.T)
-    rows = np.rint(keys.values[fk, pk, :6] * view_scale).astype(np.int64)
+    tl = collapse.fold(keys._replace(values=keys.values[..., :6]), active)  # hidden = collapsed (collapse.py)
+    pk = tl.path
+    rows = np.rint(tl.values * view_scale).astype(np.int64)
     gain = plan.gain[pk] if plan is not None else 1.0  # local px -> output px
-    decimals = key_time_decimals(t, key_slopes(keys.mask, rows, True) / view_scale * gain, time_budget)
-    color_tol = COLOR_TOLERANCE
+    kt_text, decimals = timeline_key_times(tl, rows, t, gain / view_scale, time_budget)
+    color_tol = color_tolerance
     enc = {"scale": view_scale, "tolerance": tol, "fit_px": round(float(np.min(radius)), 6),
-           "color_levels": color_tol,
+           "color_levels": color_tol, "hidden": "collapsed",
            "keytime_decimals": [int(decimals.min()), int(decimals.max())] if len(decimals) else []}
     # Geometry.
-    moving = _varying(keys.mask, rows)
+    moving = _varying(pk, p, rows)
     off = offsets(rows, pk, p)
     off[~moving] = 0
     text = _path_strings(rows, off[pk])
-    d_anims, d_first, n_keys = _linear("d", keys.mask, text, key_times(fk, t, decimals), dur, moving)
-    counts = keys.mask.sum(axis=0)
+    d_anims, d_first, n_keys = _linear("d", pk, p, text, kt_text, dur, moving)
+    counts = np.bincount(pk, minlength=p)
     d_len = np.array([len(a) for a in d_anims])
+    d_len[~active.all(axis=0)] = 0  # evenly spaced keys cannot collapse a hidden triangle
     per_key = np.bincount(pk, np.fromiter(map(len, text), np.float64, len(text)), p) / np.maximum(counts, 1)
     d_uniform = _uniform_instead("d", track, active, counts, d_len, per_key, view_scale,
                                  bound, True, lambda v, j: _path_strings(v, np.broadcast_to(off[j], (len(v), 2))),
@@ -445,9 +519,9 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     ckeys = color_keys(sheet.face_rgb[:, tris], active, color_tol)
     cpk, cfk = np.nonzero(ckeys.mask.T)
     crow = ckeys.values.transpose(1, 0, 2)[cpk, cfk].astype(np.int64)
-    c_vary = _varying(ckeys.mask, crow)
+    c_vary = _varying(cpk, p, crow)
     c_dec = key_time_decimals(t, key_slopes(ckeys.mask, crow, False), COLOR_TIME_LEVELS)
-    c_anims, _, n_color_keys = _linear("color", ckeys.mask, _hex(crow).tolist(), key_times(cfk, t, c_dec), dur,
+    c_anims, _, n_color_keys = _linear("color", cpk, p, _hex(crow).tolist(), key_times(cfk, t, c_dec), dur,
                                        c_vary)
     c_len = np.array([len(a) for a in c_anims])
     c_uniform = _uniform_instead("color", sheet.face_rgb[:, tris].astype(np.float64) * 255, active,
@@ -467,10 +541,6 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     cls = remap[np.searchsorted(values, base)]
     pal = values[rank]
     palette = np.stack([(pal >> 16) & 255, (pal >> 8) & 255, pal & 255], axis=1)
-    names = [f"c{i}" for i in range(len(palette))] + [HIDDEN_CLASS]  # code -1 -> hidden
-    codes = np.where(active, cls[None, :], -1)
-    disc_decimals = int(math.ceil(math.log10(4 * t))) if t > 1 else 1
-    v_anims = _discrete("class", codes, names, key_times(np.arange(t + 1), t, disc_decimals, "early"), dur)
     out = [_style(palette, view_scale), group_open(plan.head, t, dur) if plan is not None else "<g>"]
     ids = path_ids(tris)
     moves = [f' transform="translate({x} {y})"' if x or y else "" for x, y in off.tolist()]
@@ -487,8 +557,8 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     for j in range(p):
         if j in opens:
             out.append(opens[j])
-        body = d_anims[j] + c_anims[j] + v_anims[j]
-        el = f'<path id="{ids[j]}" class="{names[codes[0, j]]}"{moves[j]} d="{d_first[j]}"'
+        body = d_anims[j] + c_anims[j]
+        el = f'<path id="{ids[j]}" class="c{cls[j]}"{moves[j]} d="{d_first[j]}"'
         out.append(f"{el}>{body}</path>" if body else f"{el}/>")
         if j in closes:
             out.append(CLOSE)
@@ -497,6 +567,11 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     report.counts["color_keys"] = n_color_keys
     report.counts["static_paths"] = int((~moving).sum())
     report.counts["palette"] = len(palette)
+    report.counts["color_animations"] = int(sum(1 for a in c_anims if a))
+    report.counts["animated_paths"] = int(sum(1 for a in d_anims if a))
+    err = color_error(sheet.face_rgb[:, tris], active, palette[cls], c_vary, color_tol)
+    report.figures["color_error_max_levels"] = float(err.max(initial=0.0))
+    report.figures["color_error_p99_levels"] = float(np.percentile(err, 99)) if err.size else 0.0
     report.figures["keys_per_path"] = n_keys / max(p, 1)
     if plan is not None:
         report.counts.update({f"rigid_{k}": int(v) for k, v in plan.stats.items() if k != "max_gain"})

@@ -22,7 +22,7 @@ def key_times(frames: np.ndarray, n_frames: int, decimals: int | np.ndarray, sna
 
     snap says how a time falls on the decimals' grid: 'nearest' rounds; a discrete change must show at frame k
     however a player rounds its clock, so 'early' puts it half a frame early ((k - 1/2) / T, rounded) and
-    'floor' rounds down. Each distinct (frame, decimals) is formatted once."""
+    'floor' rounds down and 'ceil' up. Each distinct (frame, decimals) is formatted once."""
     frames = np.asarray(frames, np.int64)
     dec = np.broadcast_to(np.asarray(decimals, np.int64), frames.shape)
     out = np.empty(len(frames), object)
@@ -32,6 +32,8 @@ def key_times(frames: np.ndarray, n_frames: int, decimals: int | np.ndarray, sna
         q = 10**d
         if snap == "floor":
             units = (uniq * q) // n_frames
+        elif snap == "ceil":
+            units = -((-uniq * q) // n_frames)
         elif snap == "early":
             units = np.rint(np.maximum(uniq - 0.5, 0.0) * q / n_frames).astype(np.int64)
         elif snap == "nearest":

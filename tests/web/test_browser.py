@@ -10,6 +10,7 @@ import pytest
 from lxml import etree
 from PIL import Image
 
+from converter.options import PRESETS
 from web.conftest import LiveServer, make_app
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
@@ -183,7 +184,9 @@ def test_preset_refill_delete_confirmation_and_same_origin_player(browser, serve
     try:
         page.goto(server.url + "/")
         page.click("#preset-mobile")
-        assert page.input_value("#opt-size") == "256" and page.input_value("#opt-max_triangles") == "1500"
+        mobile = PRESETS["mobile"].values
+        assert page.input_value("#opt-size") == str(mobile["size"])
+        assert page.input_value("#opt-max_triangles") == str(mobile["max_triangles"])
         page.goto(server.url + "/jobs/" + "f" * 32)
         assert "“Triangle budget”" in page.text_content("#job-error")
         page.click("#try-again")

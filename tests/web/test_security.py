@@ -8,6 +8,7 @@ import time
 
 import pytest
 
+from converter.options import PRESETS
 from web.conftest import SMALL, glb_bytes, make_app, wait_job, workers_held
 from webapp.jobstore import DONE, QUEUED, RUNNING, Job
 
@@ -164,7 +165,9 @@ def test_job_page_queue_position_eta_mobile_estimate_and_delete_confirmation(emb
     assert 'id="estimate-mobile"' in page and "Make a mobile version" in page
     assert 'id="delete-confirm"' in page and "Yes, delete it" in page
     form = c.get("/?preset=mobile&retry=" + job["id"]).get_data(as_text=True)
-    assert 'value="256"' in form and 'value="1500"' in form
+    mobile = PRESETS["mobile"].values
+    assert f'value="{mobile["size"]}"' in form and f'value="{mobile["max_triangles"]}"' in form
+    assert 'id="fig-playback"' in page  # the predicted playback class (converter.playcost)
 
 
 def test_queue_position_and_eta_follow_the_queue_and_the_reported_progress(tmp_path):
@@ -194,7 +197,9 @@ def test_queue_position_and_eta_follow_the_queue_and_the_reported_progress(tmp_p
 def test_upload_form_has_the_mobile_preset_and_nav_links_the_api_page(embedded):
     c = embedded.test_client()
     html = c.get("/").get_data(as_text=True)
-    assert 'id="preset-mobile"' in html and '"max_triangles": 1500' in html and '"size": 256' in html
+    mobile = PRESETS["mobile"].values
+    assert 'id="preset-mobile"' in html and f'"max_triangles": {mobile["max_triangles"]}' in html
+    assert f'"size": {mobile["size"]}' in html
     assert 'href="/docs/api"' in html
     docs = c.get("/docs/api").get_data(as_text=True)
     assert "<script" not in docs.split("</head>")[1].replace('<script type="application/json"', "")

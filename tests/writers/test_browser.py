@@ -20,13 +20,20 @@ def pyrender_flat(anim, sheet, k):
     return color
 
 
+# Mean colour difference to the exact still: exact colours (tolerance 3 levels) vs the default static colours
+# (one colour per triangle; the sample's shading changes by up to ~38 levels, 3.5 on average).
+COLOUR_CASES = {3.0: 2.0, ConversionOptions().color_tolerance: 6.0}
+
+
 @pytest.mark.browser
 @pytest.mark.slow
-def test_animated_frames_match_pyrender_and_the_still(browser, sample_path, artifacts):
+@pytest.mark.parametrize("color_tolerance", COLOUR_CASES)
+def test_animated_frames_match_pyrender_and_the_still(browser, sample_path, artifacts, color_tolerance):
+    """Hidden triangles (collapsed in d) vanish and the played frames match the exact stills and pyrender."""
     anim = formats.load(sample_path).sliced(0, 48)
     sheet = extract.extract(anim, extract.fit_camera(anim, 192))
     size = sheet.camera.width
-    data = svg_anim.write(sheet, ConversionOptions(size=192), Report())
+    data = svg_anim.write(sheet, ConversionOptions(size=192, color_tolerance=color_tolerance), Report())
     for k in (0, 17, 33, 47):
         played = chromium_frame(browser, data, k / anim.fps, size, size)
         still = svg_anim.write_still(sheet, ConversionOptions(size=192), Report(), k)
@@ -37,10 +44,10 @@ def test_animated_frames_match_pyrender_and_the_still(browser, sample_path, arti
         assert iou(mask_p, mask_r) >= 0.97
         both = mask_p & mask_e
         diff = np.abs(played[..., :3].astype(int) - exact[..., :3].astype(int))[both]
-        assert diff.mean() <= 2.0, f"frame {k}: mean colour difference {diff.mean():.2f} to the exact still"
+        assert diff.mean() <= COLOUR_CASES[color_tolerance], f"frame {k}: mean colour difference {diff.mean():.2f}"
         inner = mask_p & mask_r
         dref = np.abs(played[..., :3].astype(int) - ref[..., :3].astype(int))[inner]
-        assert np.median(dref) <= 4, f"frame {k}: median difference {np.median(dref)} to pyrender"
+        assert np.median(dref) <= 4 + COLOUR_CASES[color_tolerance] - 2, f"frame {k}: median {np.median(dref)}"
         if k == 33:
             from PIL import Image
 

@@ -97,7 +97,7 @@ def test_the_block_decodes_to_the_sheet_within_the_tolerance(case):
     assert err[d.shown].max() > options.tolerance / 4  # keyframed, not stored exactly
     assert report.counts["keys"] < 0.5 * len(d.vertex_ids) * d.frames
     cerr = np.abs(d.rgb[:-1] - sheet.face_rgb[:, d.triangles] * 255).max(axis=-1)
-    assert cerr[d.shown].max() <= svg_anim.COLOR_TOLERANCE and not d.gouraud
+    assert cerr[d.shown].max() <= player.COLOR_LEVELS and not d.gouraud
     assert d.meta["frames"] == 24 and d.meta["viewport"] == [SIZE, SIZE]
     assert player.write(sheet, options, Report()) == data  # deterministic
 
@@ -112,7 +112,7 @@ def test_gouraud_keys_vertex_colours():
     used = np.zeros(err.shape, bool)
     for k in range(d.frames):
         used[k, np.unique(d.path_vertices[d.shown[k]])] = True
-    assert err[used].max() <= svg_anim.COLOR_TOLERANCE
+    assert err[used].max() <= player.COLOR_LEVELS
 
 
 def test_verify_reads_the_player_and_catches_wrong_data(case):

@@ -112,6 +112,18 @@ def test_colour_keys_stay_within_colour_tolerance():
     assert np.all(keys.values == np.rint(keys.values))
 
 
+def test_colour_keys_extrapolated_past_black_stay_within_tolerance():
+    """A shade that rises fast after a hidden start: the free key at 0 would lie below 0 and clipping it moved the
+    first shown frames by 12 levels (the capture-like face at 256 px)."""
+    t = np.arange(60)[:, None, None]
+    rgb = np.clip((10 + 4.0 * (t - 40)) / 255 + 0.0 * np.ones((1, 2, 3)), 0, 1)
+    rgb[:, 1] = 1 - rgb[:, 1]  # and one past white
+    active = np.broadcast_to(t[:, :, 0] >= 40, (60, 2))
+    keys = svg_anim.color_keys(rgb, active, 3.0)
+    assert np.abs(interpolate(keys) - rgb * 255)[active].max() <= 3.0 + 1e-9
+    assert keys.values.min() >= 0 and keys.values.max() <= 255
+
+
 def test_deterministic_and_svgz():
     anim = half_moving()
     a = convert_animation(anim, ConversionOptions(size=96, occlusion=False)).data

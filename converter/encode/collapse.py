@@ -1,0 +1,112 @@
+"""Visibility folded into the geometry keys: a hidden triangle is a triangle collapsed to one point.
+
+A path's keys (``keys.Keys``, frames 0..T) hold it within the bound at the frames where it is active and are
+free elsewhere. ``fold`` makes them hide the path at every inactive frame with no other animation: each hidden
+run [h0, h1] gets a collapsed key (all three vertices at one point) half a frame before h0 and half a frame
+after h1 (at 0 and T where the run touches the loop's ends), and the visible frames next to the run get keys on
+the original interpolant, so every visible frame plays what it played before. Between two collapsed keys every
+interpolated value is collapsed too (the three vertices move together), so keys inside the run are dropped.
+The triangle shrinks to its centroid within the half frame before it disappears and grows back within the
+half frame before it shows; a player never evaluates a frame time on those half-frame segments.
+
+Times are counted in half frames (0..2T). ``snap`` says how a writer may round each key's time: -1 only
+earlier (a visible key right after a collapse), +1 only later (right before one), 0 either way; -2 marks a
+visible key between two collapses, which must be placed exactly enough for both (its slope includes them).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from converter.encode.keys import Keys
+
+
+class Timeline(NamedTuple):
+    """Keys of P paths in path-major order, times in half frames."""
+
+    path: np.ndarray  # int (K,) path of each key, sorted
+    half: np.ndarray  # int (K,) time in half frames, 0..2T, increasing within a path
+    values: np.ndarray  # float64 (K, D) key values
+    collapsed: np.ndarray  # bool (K,) the key is a collapse (hides the path)
+    snap: np.ndarray  # int8 (K,): -1 round earlier only, +1 later only, 0 nearest, -2 exact (module docstring)
+
+
+def runs(active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Hidden runs of active (T, P): path, first and last hidden frame of each, path-major."""
+    t, p = active.shape
+    hidden = ~active.T  # (P, T)
+    pad = np.zeros((p, 1), bool)
+    edge = np.diff(np.concatenate([pad, hidden, pad], axis=1).astype(np.int8), axis=1)  # (P, T + 1)
+    sp, sf = np.nonzero(edge == 1)
+    _, ef = np.nonzero(edge == -1)
+    return sp, sf, ef - 1
+
+
+def interpolate_at(keys: Keys, path: np.ndarray, frame: np.ndarray) -> np.ndarray:
+    """The keys' linear interpolant of each path at each frame (both (N,)): (N, D)."""
+    t1, p = keys.mask.shape
+    pk, fk = np.nonzero(keys.mask.T)
+    code = pk * t1 + fk
+    vals = keys.values.transpose(1, 0, 2)[pk, fk]
+    q = path * t1 + frame
+    hi = np.minimum(np.searchsorted(code, q, side="left"), len(code) - 1)
+    exact = code[hi] == q
+    lo = np.where(exact, hi, hi - 1)
+    span = np.maximum(fk[hi] - fk[lo], 1)
+    f = np.where(exact, 0.0, (frame - fk[lo]) / span)[:, None]
+    return vals[lo] + f * (vals[hi] - vals[lo])
+
+
+def _point(v: np.ndarray) -> np.ndarray:
+    """Triangle rows (N, 6+) collapsed to their centroid (extra columns kept)."""
+    out = np.array(v, np.float64)
+    c = v[:, :6].reshape(len(v), 3, 2).mean(axis=1)
+    out[:, :6] = np.tile(c, 3)
+    return out
+
+
+def fold(keys: Keys, active: np.ndarray) -> Timeline:
+    """The keys with every inactive frame of each path hidden by collapsed keys (module docstring)."""
+    t, p = active.shape
+    pk, fk = np.nonzero(keys.mask.T)
+    vals = keys.values.transpose(1, 0, 2)[pk, fk]
+    # Original keys on visible frames (the loop end counts as frame T - 1's side).
+    keep = active[np.minimum(fk, t - 1), pk]
+    rp, r0, r1 = runs(active)
+    before = r0 > 0  # visible frame r0 - 1 precedes the run
+    after = r1 < t - 1  # visible frame r1 + 1 follows it
+    vp = np.concatenate([rp[before], rp[after]])
+    vf = np.concatenate([r0[before] - 1, r1[after] + 1])
+    vv = interpolate_at(keys, vp, vf) if len(vp) else np.zeros((0, vals.shape[1]))
+    # Collapsed keys: at the half frames round the run, or the loop's ends.
+    c_start = np.where(before, 2 * r0 - 1, 0)
+    c_end = np.where(after, 2 * r1 + 1, 2 * t)
+    d = vals.shape[1]
+    vb, va = np.zeros((len(rp), d)), np.zeros((len(rp), d))  # the visible values before and after each run
+    nb = int(before.sum())
+    vb[before], va[after] = vv[:nb], vv[nb:]
+    near = np.where(before[:, None], vb, va)  # what the collapse at the run's start shrinks from
+    near_end = np.where(after[:, None], va, vb)  # what the one at its end grows into
+    point_a, point_b = _point(near), _point(near_end)
+    path = np.concatenate([pk[keep], vp, rp, rp])
+    half = np.concatenate([2 * fk[keep], 2 * vf, c_start, c_end])
+    values = np.concatenate([vals[keep], vv, point_a, point_b])
+    collapsed = np.concatenate([np.zeros(int(keep.sum()) + len(vp), bool), np.ones(2 * len(rp), bool)])
+    order = np.lexsort((collapsed, half, path))
+    path, half, values, collapsed = path[order], half[order], values[order], collapsed[order]
+    dup = np.zeros(len(path), bool)
+    dup[1:] = (path[1:] == path[:-1]) & (half[1:] == half[:-1])  # an edge frame that was already a key
+    path, half, values, collapsed = path[~dup], half[~dup], values[~dup], collapsed[~dup]
+    same_prev = np.zeros(len(path), bool)
+    same_prev[1:] = path[1:] == path[:-1]
+    same_next = np.zeros(len(path), bool)
+    same_next[:-1] = path[1:] == path[:-1]
+    after_c = same_prev & np.roll(collapsed, 1) & ~collapsed
+    before_c = same_next & np.roll(collapsed, -1) & ~collapsed
+    snap = np.zeros(len(path), np.int8)
+    snap[after_c] = -1
+    snap[before_c] = 1
+    snap[after_c & before_c] = -2
+    return Timeline(path, half, values, collapsed, snap)
