@@ -33,8 +33,8 @@ class Preset(NamedTuple):
 
 # Tuned by bench_playback (the capture-like face in Chromium under 4x CPU throttling, issue 18).
 PRESETS = {
-    "mobile": Preset("Mobile", {"size": 256, "max_triangles": 1000, "tolerance": 0.5},
-                     "256 px, at most 1000 triangles, 0.5 px tolerance: a light file for phones"),
+    "mobile": Preset("Mobile", {"size": 256, "max_triangles": 1000, "tolerance": 0.5, "color_tolerance": 255.0},
+                     "256 px, at most 1000 triangles, 0.5 px tolerance, static colours: a light file for phones"),
 }
 
 Progress = Callable[[str, float], None]
@@ -137,11 +137,11 @@ class ConversionOptions:
                              unset="the last frame", advanced=True)
     tolerance: float = option(0.25, "largest vertex deviation in output pixels the encoder may add",
                               label="Tolerance (px)", minimum=0, exclusive_minimum=True, maximum=50, unit="px")
-    color_tolerance: float = option(255.0, "largest colour deviation (8-bit levels per channel) of the flat SVG; a "
+    color_tolerance: float = option(3.0, "largest colour deviation (8-bit levels per channel) of the flat SVG; a "
                                     "triangle whose shade stays within it gets one static colour. Animated colours "
-                                    "cost players most (bench_playback): the default 255 keeps every colour static, "
-                                    "3 animates the exact shading", label="Colour tolerance (levels)", minimum=0.6,
-                                    maximum=255, advanced=True)
+                                    "cost players most (bench_playback): the default 3 animates the exact shading, "
+                                    "255 keeps every colour static (the mobile preset)",
+                                    label="Colour tolerance (levels)", minimum=0.6, maximum=255, advanced=True)
     raw: bool = option(False, "write every frame, no keyframe reduction (the chapter's unoptimised encoding)",
                        label="Every frame, no keyframe reduction", advanced=True)
     max_triangles: int | None = option(None, "triangle budget (simplify once, shared by every frame)",
