@@ -32,18 +32,21 @@ THROTTLES = (1, 4, 6)
 SECONDS = 3.0
 MOBILE = {"preset": "mobile"}
 # The preset with exact colours: spelled out, since a value equal to the default would take the preset's.
+STATIC_COLOURS = {"color_tolerance": 255.0}  # the default options but one static colour per triangle
 EXACT_COLOURS = {k: v for k, v in PRESETS["mobile"].values.items() if k != "color_tolerance"}
 
 
 def outputs() -> list[tuple[str, bytes, int, Report]]:
     """(label, svg bytes, viewport px, report) for every file measured."""
     out = []
-    for label, opts in (("sample, default", {}), ("sample, mobile preset", MOBILE)):
+    for label, opts in (("sample, default (exact colours)", {}), ("sample, static colours", STATIC_COLOURS),
+                        ("sample, mobile preset", MOBILE)):
         options = ConversionOptions(**opts)
         result = convert(SAMPLE, options)
         out.append((label, result.data, options.size, result.report))
     anim = capture_like()
-    for label, opts in (("capture-like, default", {}), ("capture-like, mobile preset", MOBILE),
+    for label, opts in (("capture-like, default (exact colours)", {}), ("capture-like, static colours", STATIC_COLOURS),
+                        ("capture-like, mobile preset", MOBILE),
                         ("capture-like, mobile preset, exact colours", EXACT_COLOURS)):
         options = ConversionOptions(**opts)
         result = convert_animation(anim, options)
