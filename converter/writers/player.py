@@ -45,6 +45,7 @@ from converter.errors import InputError
 from converter.options import ConversionOptions, Report
 from converter.sheet import Sheet
 from converter.writers import svg_anim
+from converter.writers.metadata import source_fields
 
 MAGIC = b"FSVP"
 VERSION = 1
@@ -235,15 +236,7 @@ def metadata(sheet: Sheet, options: ConversionOptions, scale: int) -> dict:
     return {
         "format": "facesvg-player",
         "version": VERSION,
-        "frames": sheet.n_frames,
-        "fps": sheet.fps,
-        "duration": sheet.duration,
-        "viewport": [sheet.camera.width, sheet.camera.height],
-        "camera": sheet.camera.to_json(),
-        "source_sha256": sheet.info.get("source_sha256", ""),
-        "source_frames": sheet.info.get("source_frames", [0, sheet.n_frames]),
-        "options": options.to_json(),
-        "counts": {k: v for k, v in sheet.info.items() if isinstance(v, int)},
+        **source_fields(sheet, options),
         "encoding": {"mode": "player", "scale": scale, "tolerance": options.tolerance,
                      "color_levels": COLOR_LEVELS},
     }

@@ -39,6 +39,7 @@ from converter.encode.order import draw_list
 from converter.errors import InputError
 from converter.options import ConversionOptions, Report
 from converter.sheet import Sheet
+from converter.writers.metadata import source_fields
 from converter.writers.svg_transforms import CLOSE, group_open
 from converter.writers.svgtext import key_times
 from converter.writers.svgtext import number as svg_number
@@ -96,15 +97,7 @@ def metadata(sheet: Sheet, options: ConversionOptions, report: Report, extra: di
     doc = {
         "format": "facesvg",
         "version": FORMAT_VERSION,
-        "frames": sheet.n_frames,
-        "fps": sheet.fps,
-        "duration": sheet.duration,
-        "viewport": [sheet.camera.width, sheet.camera.height],
-        "camera": sheet.camera.to_json(),
-        "source_sha256": sheet.info.get("source_sha256", ""),
-        "source_frames": sheet.info.get("source_frames", [0, sheet.n_frames]),
-        "options": options.to_json(),
-        "counts": {k: v for k, v in sheet.info.items() if isinstance(v, int)},
+        **source_fields(sheet, options),
         "triangle_order": [int(i) for i in (sheet.order if order is None else order)],
     }
     if extra:
