@@ -21,14 +21,13 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from bench.capture_like import capture_like
-from bench.playback import chromium, host_page, measure, serve
+from bench.playback import THROTTLES, chromium, host_page, measure, serve
 from converter.convert import convert, convert_animation
 from converter.options import PRESETS, ConversionOptions, Report
 from converter.playcost import playback_class
+from tests.conftest import SAMPLE
 
 TITLE = "Playback in Chromium under CPU throttling (issue 18)"
-SAMPLE = ROOT / "samples" / "face.glb"
-THROTTLES = (1, 4, 6)
 SECONDS = 3.0
 MOBILE = {"preset": "mobile"}
 # The preset with exact colours: spelled out, since a value equal to the default would take the preset's.

@@ -27,16 +27,15 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from bench.capture_like import capture_like
-from bench.playback import chromium, measure, serve
+from bench.playback import THROTTLES, chromium, measure, serve
 from converter import formats
 from converter.convert import extract_sheet, prepare
 from converter.options import ConversionOptions, Report
 from converter.outputs import writer_for
 from converter.verify import verify_animation
+from tests.conftest import SAMPLE
 
 TITLE = "Player output (--to player): size, write time and playback (issue 18)"
-SAMPLE = ROOT / "samples" / "face.glb"
-THROTTLES = (1, 4, 6)
 SECONDS = 5.0
 RUNS = 3
 

@@ -22,6 +22,8 @@ from playwright.sync_api import Browser
 
 from tests.conftest import chromium_path, launched_chromium
 
+THROTTLES = (1, 4, 6)  # CDP CPU throttling rates: a desktop, a mid-range phone, a low-end phone
+
 
 class Playback(NamedTuple):
     """What one file did in one mode at one throttling rate."""

@@ -13,10 +13,11 @@ Three encodings of the same document structure:
   where that is shorter); integer coordinates in a viewBox scaled so rounding is part of the same budget;
   relative path syntax; static triangles without <animate>; fill and stroke are currentColor, a shared CSS
   class per colour; a triangle whose shade stays within options.color_tolerance levels of one colour is that
-  static colour (the default keeps every colour static: a colour animation restyles its path at every frame
-  and costs players far more than a d animation, bench_playback), others keyed linearly within it; hidden
-  frames folded into the d animation (converter.encode.collapse: the triangle collapses to a point within the
-  half frame before it hides), so a path has at most a d and a color <animate>; never-visible triangles dropped.
+  static colour, others keyed linearly within it (the default, 3 levels, is the exact shading; 255, the mobile
+  preset's, keeps every colour static: a colour animation restyles its path at every frame and costs players
+  far more than a d animation, bench_playback); hidden frames folded into the d animation
+  (converter.encode.collapse: the triangle collapses to a point within the half frame before it hides), so a
+  path has at most a d and a color <animate>; never-visible triangles dropped.
 
 Frame k shows at t = k / fps; dur = T / fps; linear animations end with a key at keyTime 1 (the loop end).
 Every static attribute (group transform, d, colour class, display) holds frame 0 as played, so a renderer
@@ -301,7 +302,6 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     report.counts["paths"] = p
     if mode == "bounded":
         report.figures["playback_ms_4x"] = playcost.predict_ms(report.counts)
-    if mode == "bounded":
         # The raw file's d values alone, counted exactly (writing them would cost more than this conversion).
         report.sizes["raw_d_values"] = raw_values_bytes(glob)
     report.counts["depth_conflicts"] = dl.conflicts
