@@ -33,8 +33,10 @@ class Preset(NamedTuple):
 
 # Tuned by bench_playback (the capture-like face in Chromium under 4x CPU throttling, issue 18).
 PRESETS = {
-    "mobile": Preset("Mobile", {"size": 256, "max_triangles": 1000, "tolerance": 0.5, "color_tolerance": 255.0},
-                     "256 px, at most 1000 triangles, 0.5 px tolerance, static colours: a light file for phones"),
+    "mobile": Preset("Mobile", {"size": 256, "max_triangles": 1000, "tolerance": 0.5, "color_tolerance": 255.0,
+                                "max_animations": 300},
+                     "256 px, at most 1000 triangles, 0.5 px tolerance, static colours, at most 300 animated paths: "
+                     "a light file that plays smoothly on phones"),
 }
 
 Progress = Callable[[str, float], None]
@@ -142,6 +144,11 @@ class ConversionOptions:
                                     "cost players most (bench_playback): the default 3 animates the exact shading, "
                                     "255 keeps every colour static (the mobile preset)",
                                     label="Colour tolerance (levels)", minimum=0.6, maximum=255, advanced=True)
+    max_animations: int | None = option(None, "at most this many animated elements in the flat SVG: paths of one "
+                                        "static colour in one group are merged into one path of several "
+                                        "triangles, keyed together (more bytes, far cheaper playback)",
+                                        label="Animated element budget", minimum=1,
+                                        unset="one path per triangle", advanced=True)
     raw: bool = option(False, "write every frame, no keyframe reduction (the chapter's unoptimised encoding)",
                        label="Every frame, no keyframe reduction", advanced=True)
     max_triangles: int | None = option(None, "triangle budget (simplify once, shared by every frame)",

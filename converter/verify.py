@@ -157,21 +157,39 @@ def _key_index(anim: etree._Element, n: int, u: np.ndarray, discrete: bool) -> t
     return i, frac
 
 
-def _triangle_of_d(d: str) -> list[float]:
-    """First three absolute vertices of a path made of M/L/H/V/Z commands (relative or absolute)."""
+def _triangles_of_d(d: str) -> list[float]:
+    """The first three absolute vertices of each subpath of a path made of M/L/H/V/Z commands (relative or
+    absolute), flattened: 6 numbers per triangle (a merged path holds several, converter.encode.merge)."""
+    out: list[float] = []
     pts: list[tuple[float, float]] = []
     cmd = ""
     x = y = 0.0
+    start = (0.0, 0.0)
     nums: list[float] = []
+
+    def close() -> None:
+        if pts:
+            if len(pts) < 3:
+                raise InputError("a path has fewer than 3 vertices; the file is corrupt.")
+            out.extend([pts[0][0], pts[0][1], pts[1][0], pts[1][1], pts[2][0], pts[2][1]])
+            pts.clear()
+
     for tok in _TOKEN.findall(d):
         if tok.isalpha():
             cmd, nums = tok, []
+            if cmd in ("Z", "z"):
+                close()
+                x, y = start  # after a closepath the current point is the subpath's start
             continue
         nums.append(float(tok))
         c = cmd.upper()
         rel = cmd.islower()
         if c in ("M", "L") and len(nums) == 2:
+            if c == "M":
+                close()
             x, y = (x + nums[0], y + nums[1]) if rel else (nums[0], nums[1])
+            if c == "M":
+                start = (x, y)
             pts.append((x, y))
             nums = []
             if cmd in ("M", "m"):  # further pairs after M are implicit linetos
@@ -185,9 +203,10 @@ def _triangle_of_d(d: str) -> list[float]:
             nums = []
         elif c not in ("M", "L", "H", "V"):
             raise InputError(f"path command {cmd!r} is not a triangle; only M/L/H/V/Z paths can be verified.")
-    if len(pts) < 3:
+    close()
+    if not out:
         raise InputError("a path has fewer than 3 vertices; the file is corrupt.")
-    return [pts[0][0], pts[0][1], pts[1][0], pts[1][1], pts[2][0], pts[2][1]]
+    return out
 
 
 def _hidden_classes(root: etree._Element) -> set[str]:
@@ -225,19 +244,22 @@ def _shown(el: etree._Element, times: np.ndarray, hidden_classes: set[str]) -> n
 
 
 def _path_xy(el: etree._Element, times: np.ndarray) -> np.ndarray:
-    """(T, 6) vertex coordinates of a path's d, animated or not, in user units."""
+    """(T, 6 n) vertex coordinates of a path's d of n triangles, animated or not, in user units."""
     base = el.get("d")
     if base:
-        out = np.tile(np.array(_triangle_of_d(base), np.float64), (len(times), 1))
+        out = np.tile(np.array(_triangles_of_d(base), np.float64), (len(times), 1))
     else:
         out = np.full((len(times), 6), np.nan)
     for anim in el.findall(f"{SVG_NS}animate[@attributeName='d']"):
         mode = anim.get("calcMode", "linear")
         if mode not in ("linear", "discrete"):
             raise InputError(f"calcMode {mode!r} on d cannot be verified; use linear or discrete.")
-        values = np.array([_triangle_of_d(v) for v in anim.get("values", "").split(";") if v.strip()], np.float64)
-        if len(values) == 0:
+        rows = [_triangles_of_d(v) for v in anim.get("values", "").split(";") if v.strip()]
+        if len(rows) == 0:
             raise InputError("an <animate> of d has no values; the file is corrupt.")
+        if len({len(r) for r in rows} | {out.shape[1]}) > 1:
+            raise InputError("the values of a d animation hold different numbers of triangles; the file is corrupt.")
+        values = np.array(rows, np.float64)
         u, on = _phase(anim, times)
         i, frac = _key_index(anim, len(values), u, discrete=mode == "discrete")
         j = np.minimum(i + 1, len(values) - 1)
@@ -309,11 +331,6 @@ def _group_matrices(g: etree._Element, times: np.ndarray) -> np.ndarray:
     return acc
 
 
-def collapsed(xy: np.ndarray) -> np.ndarray:
-    """Bool (T,) of triangles (T, 3, 2): all three vertices at one point (drawn as nothing: hidden)."""
-    return (xy == xy[:, :1]).all(axis=(1, 2))
-
-
 def evaluate(data: bytes) -> Evaluated:
     """Evaluate every triangle path of a facesvg SVG (or player file) at the frame times k / fps."""
     if player.is_player(data):  # the player's block decoded by its own reader
@@ -334,12 +351,21 @@ def evaluate(data: bytes) -> Evaluated:
     tris, xys, shown, points = [], [], [], []
     group_cache: dict[etree._Element, tuple[np.ndarray, np.ndarray]] = {}  # keyed by element: id() of a freed
     # lxml proxy is reused by the next one, which handed nested groups another group's transform
+    listed = [int(i) for i in meta.get("triangle_order", [])]
+    at = 0  # a path of n triangles draws the next n of the metadata's triangle_order
     for el in root.iter(f"{SVG_NS}path"):
         m = re.fullmatch(r"f(\d+)[a-z]?", el.get("id", ""))
         if not m:
             continue
-        xy = _path_xy(el, times).reshape(len(times), 3, 2)
-        point = collapsed(xy)
+        flat = _path_xy(el, times)
+        n = flat.shape[1] // 6
+        if n > 1 and (listed[at:at + 1] != [int(m.group(1))] or len(listed) < at + n):
+            raise InputError(f"path {el.get('id')} holds {n} triangles the metadata's triangle_order does not "
+                             "list; the file is corrupt.")
+        ids = listed[at:at + n] if n > 1 else [int(m.group(1))]
+        at += n
+        xy = flat.reshape(len(times), n, 3, 2)
+        point = (xy == xy[:, :, :1]).all(axis=(2, 3))  # (T, n)
         vis = _shown(el, times, hidden_classes)
         mat = np.broadcast_to(view, (len(times), 3, 3))
         for anc in reversed(list(el.iterancestors(f"{SVG_NS}g"))):
@@ -352,14 +378,15 @@ def evaluate(data: bytes) -> Evaluated:
         own = el.get("transform")
         if own:
             mat = mat @ _parse_transform(own)
-        xy = np.einsum("tij,tvj->tvi", mat[:, :2, :2], xy) + mat[:, None, :2, 2]
-        tris.append(int(m.group(1)))
+        xy = np.einsum("tij,tnvj->tnvi", mat[:, :2, :2], xy) + mat[:, None, None, :2, 2]
+        tris.extend(ids)
         xys.append(xy)
-        shown.append(vis & ~point)
-        points.append(vis & point)
+        shown.append(vis[:, None] & ~point)
+        points.append(vis[:, None] & point)
     if not tris:
         raise InputError("the SVG has no triangle paths (id f<number>); only facesvg output can be verified.")
-    return Evaluated(meta, np.array(tris), np.stack(xys, axis=1), np.stack(shown, axis=1), np.stack(points, axis=1))
+    return Evaluated(meta, np.array(tris), np.concatenate(xys, axis=1), np.concatenate(shown, axis=1),
+                     np.concatenate(points, axis=1))
 
 
 def compare(ev: Evaluated, exact_xy: np.ndarray, expected_visible: np.ndarray, faces: np.ndarray,

@@ -33,7 +33,7 @@ from xml.sax.saxutils import escape
 import numpy as np
 
 from converter import playcost
-from converter.encode import collapse, freeknots, groups
+from converter.encode import collapse, freeknots, groups, merge
 from converter.encode import keys as keyframes
 from converter.encode.budget import ErrorBudget, viewbox_scale
 from converter.encode.order import draw_list
@@ -290,16 +290,19 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
             plan = None
     if plan is None:
         track = track.astype(np.float64)
+    joined = None
+    if mode == "bounded" and options.max_animations is not None and p > options.max_animations:
+        joined, tris, active, track, plan = _merge_plan(sheet, tris, active, track, plan, options)
     if mode in ("raw", "chapter"):
         body = _encode_raw(sheet, tris, active, track, dur, chapter=mode == "chapter")
         scale = 1
     else:
         body, scale, enc = _encode_keyed(sheet, budget, tris, active, track, dur, report, plan,
-                                         options.color_tolerance)
+                                         options.color_tolerance, joined)
         extra["encoding"].update(enc)
     head = [_header(sheet, scale), metadata(sheet, options, report, extra, order=tris),
             f"<title>{escape(sheet.name)}</title>"]
-    report.counts["paths"] = p
+    report.counts["paths"] = p if joined is None else len(joined.starts) - 1
     if mode == "bounded":
         report.figures["playback_ms_4x"] = playcost.predict_ms(report.counts)
         # The raw file's d values alone, counted exactly (writing them would cost more than this conversion).
@@ -308,6 +311,95 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     report.counts["depth_conflicts_left"] = dl.residual
     report.counts["layer_copies"] = int(len(tris) - len(np.unique(tris)))
     return ("\n".join(head + body) + "\n</g></svg>\n").encode("utf-8")
+
+
+def _merge_plan(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.ndarray, plan: groups.Plan | None,
+                options: ConversionOptions):
+    """converter.encode.merge's sets for the paths, and the paths, their tracks and the plan in its order."""
+    segment = np.zeros(len(tris), np.int64)
+    if plan is not None:  # a set never crosses the edge of a group
+        edge = np.zeros(len(tris) + 1, np.int64)
+        edge[plan.groups.ravel()] = 1
+        segment = np.cumsum(edge[:-1])
+    joined = merge.plan(segment, sheet.face_rgb[:, tris], active, options.color_tolerance,
+                        sheet.xy[:, sheet.faces[tris]], options.max_animations)
+    o = joined.order
+    if plan is not None:
+        keys = plan.keys._replace(mask=plan.keys.mask[:, o], values=plan.keys.values[:, o],
+                                  first_active=plan.keys.first_active[o])
+        plan = plan._replace(track=plan.track[:, o], radius=plan.radius[o], band=plan.band[o], gain=plan.gain[o],
+                             keys=keys)
+        track = plan.track
+    else:
+        track = track[:, o]
+    return joined, tris[o], active[:, o], track, plan
+
+
+def _merged_geometry(track: np.ndarray, active: np.ndarray, radius: np.ndarray, gain: np.ndarray,
+                     sets: list[tuple[int, int]], budget: ErrorBudget, dur: str) -> tuple[list[str], list[str], int]:
+    """Per merged set (first, one-past-last path) its <animate> of d and frame-0 d: one subpath per path, every
+    point keyed together (free knots within the set's radius wherever any of its paths shows), each path
+    collapsed where it hides; a path's values at the keys the others add lie on its own interpolant, so every
+    shown frame keeps the bound."""
+    t = active.shape[0]
+    scale = budget.scale
+    width = max(b - a for a, b in sets)
+    idx = np.array([[min(a + i, b - 1) for i in range(width)] for a, b in sets], np.int64)  # (Q, M) padded
+    q = len(sets)
+    joint_track = track[:, idx].reshape(t, q, width * 6)
+    keys = freeknots.point_keys(joint_track, active[:, idx].any(axis=2), radius[idx[:, 0]])
+    members = np.concatenate([np.arange(a, b) for a, b in sets])
+    set_of = np.repeat(np.arange(q), [b - a for a, b in sets])
+    slot = members - np.repeat([a for a, _ in sets], [b - a for a, b in sets])
+    vals = keys.values.reshape(t + 1, q, width, 6)[:, set_of, slot]
+    mk = keyframes.Keys(keys.mask[:, set_of], vals, keys.first_active[set_of])
+    tl = collapse.fold(mk, active[:, members])
+    bounds = np.searchsorted(tl.path, np.arange(len(members) + 1))
+    paths, halves, values, coll, snaps = [], [], [], [], []
+    first = 0
+    for k, (a, b) in enumerate(sets):
+        n = b - a
+        lo, hi = bounds[first], bounds[first + n]
+        h = np.unique(tl.half[lo:hi])
+        v = np.empty((len(h), width, 6))
+        for i in range(n):  # each path on its own interpolant at every key of the set
+            s0, s1 = bounds[first + i], bounds[first + i + 1]
+            for c in range(6):
+                v[:, i, c] = np.interp(h, tl.half[s0:s1], tl.values[s0:s1, c])
+        v[:, n:] = v[:, n - 1:n]
+        pts = v.reshape(len(h), width, 3, 2)
+        point = (pts == pts[:, :, :1]).all(axis=(2, 3))  # (K, M) the path is collapsed at the key
+        after = np.zeros_like(point)
+        before = np.zeros_like(point)
+        after[1:] = point[:-1] & ~point[1:]
+        before[:-1] = point[1:] & ~point[:-1]
+        s = np.where(after & before, -2, np.where(after, -1, np.where(before, 1, 0)))
+        worst = np.where((s == -2).any(axis=1) | ((s == -1).any(axis=1) & (s == 1).any(axis=1)), -2,
+                         np.where((s == -1).any(axis=1), -1, np.where((s == 1).any(axis=1), 1, 0)))
+        paths.append(np.full(len(h), k))
+        halves.append(h)
+        values.append(v.reshape(len(h), width * 6))
+        coll.append(point.all(axis=1))
+        snaps.append(worst)
+        first += n
+    whole = collapse.Timeline(np.concatenate(paths), np.concatenate(halves), np.concatenate(values),
+                              np.concatenate(coll), np.concatenate(snaps).astype(np.int8))
+    rows = np.rint(whole.values * scale).astype(np.int64)
+    kt_text, _ = timeline_key_times(whole, rows, t, gain[idx[:, 0]][whole.path] / scale, budget.keytimes)
+    kb = np.searchsorted(whole.path, np.arange(q + 1))
+    anims, firsts = [], []
+    for k, (a, b) in enumerate(sets):
+        n = b - a
+        r = rows[kb[k]:kb[k + 1], :n * 6].reshape(-1, 6)
+        off = np.zeros((len(r), 2), np.int64)
+        off.reshape(-1, n, 2)[:, 1:] = r.reshape(-1, n, 6)[:, :-1, :2]  # a moveto after z is relative to the
+        parts = _path_strings(r, off)  # start of the subpath before
+        text = ["".join(parts[i:i + n]) for i in range(0, len(parts), n)]
+        firsts.append(text[0])
+        moving = len(set(text)) > 1
+        anims.append(f'<animate attributeName="d" dur="{dur}" repeatCount="indefinite" '
+                     f'keyTimes="{";".join(kt_text[kb[k]:kb[k + 1]])}" values="{";".join(text)}"/>' if moving else "")
+    return anims, firsts, len(rows)
 
 
 def raw_values_bytes(track: np.ndarray) -> int:
@@ -469,9 +561,9 @@ def timeline_key_times(tl: collapse.Timeline, rows: np.ndarray, t: int, px: floa
 
 def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: np.ndarray, track: np.ndarray,
                   dur: str, report: Report, plan: groups.Plan | None = None,
-                  color_tolerance: float = 3.0) -> tuple[list[str], int, dict]:
+                  color_tolerance: float = 3.0, joined: merge.Merge | None = None) -> tuple[list[str], int, dict]:
     """The error-bounded integer encoding (module docstring) within budget; plan: rigid groups (local tracks);
-    colours within color_tolerance levels."""
+    colours within color_tolerance levels; joined: paths drawn as one element (converter.encode.merge)."""
     t, p = active.shape
     tol = budget.tolerance
     view_scale = budget.scale
@@ -510,6 +602,17 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
         d_first[j] = _path_strings(d_uniform[j][:1], off[j:j + 1])[0]
     # Colour: linear keys within the colour tolerance; the first key's colour is the path's class.
     ckeys = color_keys(sheet.face_rgb[:, tris], active, color_tol)
+    starts = np.arange(p + 1) if joined is None else joined.starts
+    sets = [(a, b) for a, b in zip(starts[:-1].tolist(), starts[1:].tolist()) if b - a > 1]
+    if sets:  # a merged path's one static colour (its code's), and its d keyed for all its triangles together
+        levels = joined.levels
+        inside = np.concatenate([np.arange(a, b) for a, b in sets])
+        ckeys.mask[:, inside] = False
+        ckeys.mask[0, inside] = ckeys.mask[t, inside] = True
+        ckeys.values[0, inside] = ckeys.values[t, inside] = levels[inside]
+        m_radius = np.broadcast_to(np.asarray(radius, np.float64), (p,))
+        m_gain = plan.gain if plan is not None else np.ones(p)
+        m_anims, m_first, m_keys = _merged_geometry(track, active, m_radius, m_gain, sets, budget, dur)
     cpk, cfk = np.nonzero(ckeys.mask.T)
     crow = ckeys.values.transpose(1, 0, 2)[cpk, cfk].astype(np.int64)
     c_vary = _varying(cpk, p, crow)
@@ -547,14 +650,30 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
                 texts[band] = group_open(plan.motions[band], t, dur)
             opens[a] = texts[band]
             closes.add(b - 1)
-    for j in range(p):
-        if j in opens:
-            out.append(opens[j])
-        body = d_anims[j] + c_anims[j]
-        el = f'<path id="{ids[j]}" class="c{cls[j]}"{moves[j]} d="{d_first[j]}"'
+    merged = {a: k for k, (a, _) in enumerate(sets)}
+    for a, b in zip(starts[:-1].tolist(), starts[1:].tolist()):
+        if a in opens:
+            out.append(opens[a])
+        if a in merged:
+            k = merged[a]
+            body = m_anims[k]
+            el = f'<path id="{ids[a]}" class="c{cls[a]}" d="{m_first[k]}"'
+        else:
+            body = d_anims[a] + c_anims[a]
+            el = f'<path id="{ids[a]}" class="c{cls[a]}"{moves[a]} d="{d_first[a]}"'
         out.append(f"{el}>{body}</path>" if body else f"{el}/>")
-        if j in closes:
+        if b - 1 in closes:
             out.append(CLOSE)
+    if sets:  # the merged paths' own keys replace their triangles' single ones in the counts
+        inside_keys = int(np.isin(pk, inside).sum())
+        n_keys += m_keys - inside_keys
+        kept = np.ones(p, bool)
+        kept[inside] = False
+        d_anims = [a for a, k in zip(d_anims, kept.tolist()) if k] + m_anims
+        report.counts["merged_paths"] = len(sets)
+        report.counts["merged_triangles"] = int(len(inside))
+        report.counts["merge_palette"] = joined.colours
+        report.counts["merge_size"] = joined.size
     report.counts["keys"] = n_keys
     report.counts["uniform_paths"] = n_uniform
     report.counts["color_keys"] = n_color_keys

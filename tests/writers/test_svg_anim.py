@@ -13,7 +13,7 @@ from converter.convert import convert_animation
 from converter.encode.budget import viewbox_scale
 from converter.encode.keys import interpolate
 from converter.options import ConversionOptions, Report
-from converter.verify import _triangle_of_d, verify_animation
+from converter.verify import _triangles_of_d, verify_animation
 from converter.writers import svg_anim
 from converter.writers.svg_anim import _path_strings, offsets
 from verify.synth import grid
@@ -160,4 +160,4 @@ def test_offsets_shorten_keys_only_where_they_pay():
     assert sum(map(len, moved)) < sum(map(len, plain)) - 30 * 4
     # The moved text plus its translate is the same triangle: parse both back.
     for a, b in zip(plain, moved):
-        assert np.allclose(np.array(_triangle_of_d(a)), np.array(_triangle_of_d(b)) + np.tile(off[0], 3))
+        assert np.allclose(np.array(_triangles_of_d(a)), np.array(_triangles_of_d(b)) + np.tile(off[0], 3))
