@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from playwright.sync_api import Browser
+from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from tests.conftest import chromium_path, launched_chromium
 
@@ -79,16 +80,22 @@ def host_page(svg_name: str, size: int) -> str:
             "</body></html>")
 
 
-def measure(browser: Browser, url: str, size: int, throttle: float, seconds: float) -> Playback:
-    """Play the page at url for `seconds` under `throttle`x CPU slowdown and measure it."""
+def measure(browser: Browser, url: str, size: int, throttle: float, seconds: float,
+            load_seconds: float = 300.0) -> Playback | None:
+    """Play the page at url for `seconds` under `throttle`x CPU slowdown and measure it; None when it shows no
+    frame within load_seconds."""
     context = browser.new_context(viewport={"width": size, "height": size})
     page = context.new_page()
     cdp = context.new_cdp_session(page)
     try:
         cdp.send("Performance.enable")
         cdp.send("Emulation.setCPUThrottlingRate", {"rate": throttle})
-        page.goto(url, wait_until="load", timeout=300_000)
-        first = float(page.evaluate(_FIRST_FRAME))
+        try:
+            page.goto(url, wait_until="load", timeout=load_seconds * 1000)
+            page.set_default_timeout(load_seconds * 1000)
+            first = float(page.evaluate(_FIRST_FRAME))
+        except PlaywrightTimeout:
+            return None
         changed = [0, ""]  # frames whose image differs from the previous one, last digest
         pending: list[int] = []  # screencast frames to acknowledge (never from inside the event handler)
 

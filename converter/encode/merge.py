@@ -72,7 +72,7 @@ def colour_codes(rgb: np.ndarray, active: np.ndarray, tolerance: float, colours:
 
 def winding(xy_paths: np.ndarray, active: np.ndarray) -> np.ndarray:
     """Per path (xy_paths (T, P, 3, 2)) the sign of its area wherever shown: +1, -1, or 0 when it changes."""
-    a = np.asarray(xy_paths, np.float64)
+    a = xy_paths
     e1, e2 = a[:, :, 1] - a[:, :, 0], a[:, :, 2] - a[:, :, 0]
     area = e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]
     pos = ((area > 0) | ~active).all(axis=0)
@@ -158,7 +158,7 @@ def plan(segment: np.ndarray, rgb: np.ndarray, active: np.ndarray, tolerance: fl
             break
     # Paths of one run may go in any order: neighbours go together (along a Z-order curve of their mean
     # position), since they move alike and a set's keys follow its busiest path.
-    centre = np.asarray(xy_paths, np.float64).mean(axis=(0, 2))[order]  # (P, 2)
+    centre = xy_paths.mean(axis=(0, 2), dtype=np.float64)[order]  # (P, 2)
     run_of = np.repeat(np.arange(len(lengths)), lengths)
     order = order[np.lexsort((_z_order(centre), run_of))]
     starts = [np.linspace(a, a + n, -(-n // size) + 1).round().astype(np.int64)[:-1]

@@ -51,12 +51,7 @@ COLOR_TIME_LEVELS = 0.1  # of which rounding the colour keyTimes may take
 COLOR_SLACK = 0.05  # levels kept free of evenly spaced colour keys (checked exactly, rounding included)
 BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime): what groups weigh
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
-RAW_COUNT_PATHS = 1024  # paths per block when counting the raw encoding's bytes
-
-
-def hex_colors(rgb: np.ndarray) -> np.ndarray:
-    """Display-space 0..1 RGB (..., 3) to '#rrggbb' strings."""
-    return _hex(np.clip(np.round(np.asarray(rgb) * 255), 0, 255).astype(np.int64))
+RAW_COUNT_PATHS = 1024  # paths per block when writing the raw encoding or counting its bytes
 
 
 def _hex(levels: np.ndarray) -> np.ndarray:
@@ -195,13 +190,17 @@ def offsets(rows: np.ndarray, pk: np.ndarray, p: int) -> np.ndarray:
 
 
 def _raw_strings(tri_xy: np.ndarray) -> list[str]:
-    """The chapter's 'M x,y L x,y L x,y Z' with 2 decimals, (N, 6) px -> N strings."""
-    c = np.rint(tri_xy.astype(np.float64) * 100).astype(np.int64)
-    sign = np.where(c < 0, "-", "")
+    """The chapter's 'M x,y L x,y L x,y Z' with 2 decimals, (N, 6) px -> N strings (one format call)."""
+    c = np.rint(np.asarray(tri_xy, np.float64) * 100).astype(np.int64)
+    if not len(c):
+        return []
     a = np.abs(c)
-    whole = np.char.add(sign, (a // 100).astype(str))
-    parts = np.char.add(whole, np.char.add(".", np.char.zfill((a % 100).astype(str), 2)))
-    return [f"M{r[0]},{r[1]}L{r[2]},{r[3]}L{r[4]},{r[5]}Z" for r in parts.tolist()]
+    fields = np.empty(c.shape + (3,), object)
+    fields[..., 0] = np.where(c < 0, "-", "")
+    fields[..., 1] = a // 100
+    fields[..., 2] = a % 100
+    one = "M%s%d.%02d,%s%d.%02dL%s%d.%02d,%s%d.%02dL%s%d.%02d,%s%d.%02dZ\x00"
+    return ((one * len(c)) % tuple(fields.ravel().tolist()))[:-1].split("\x00")
 
 
 def color_keys(rgb: np.ndarray, active: np.ndarray, tolerance: float) -> keyframes.Keys:
@@ -288,7 +287,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
             tris, active, track = tris[plan.order], active[:, plan.order], plan.track
         else:
             plan = None
-    if plan is None:
+    if plan is None and mode == "bounded":  # the raw encodings convert a block of paths at a time
         track = track.astype(np.float64)
     joined = None
     if mode == "bounded" and options.max_animations is not None and p > options.max_animations:
@@ -420,13 +419,31 @@ def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.nd
     """The raw file: every frame's coordinates (2 decimals) as evenly spaced values (frame k at k/T, the last
     held to T); fill, stroke and display as discrete animations where they change. With chapter=True the
     chapter's post-optimisations: coordinates only at frames that need them (nothing while hidden, a still
-    run reduced to its two ends) placed with keyTimes, exact to 2 decimals."""
+    run reduced to its two ends) placed with keyTimes, exact to 2 decimals. Written RAW_COUNT_PATHS paths at a
+    time, so the texts of every frame of every path never exist at once (memory follows the output)."""
     t, p = active.shape
-    colors = hex_colors(sheet.face_rgb[:, tris]).tolist()  # (T, P)
     kt = key_times(np.arange(t + 1), t, 6, "early")
+    kt_lin = key_times(np.arange(t + 1), t, 6) if chapter else []
+    out = ['<g stroke-width="0.5" stroke-linejoin="round">']
+    ids = path_ids(tris)
+    for a in range(0, p, RAW_COUNT_PATHS):
+        sl = slice(a, a + RAW_COUNT_PATHS)
+        out += _raw_block(sheet.face_rgb[:, tris[sl]], active[:, sl], track[:, sl], ids[sl], kt, kt_lin, dur, chapter)
+    return out
+
+
+def _raw_block(rgb: np.ndarray, active: np.ndarray, track: np.ndarray, ids: list[str], kt: list[str],
+               kt_lin: list[str], dur: str, chapter: bool) -> list[str]:
+    """_encode_raw's paths for one block: colours rgb (T, P, 3), active (T, P), tracks (T, P, 6) px."""
+    t, p = active.shape
+    track = np.asarray(track, np.float64)
+    levels = np.clip(np.round(np.asarray(rgb) * 255), 0, 255).astype(np.int64)
+    code = (levels[..., 0] << 16) | (levels[..., 1] << 8) | levels[..., 2]  # (T, P)
+    packed, fill_codes = np.unique(code, return_inverse=True)
+    names = _hex(np.stack([(packed >> 16) & 255, (packed >> 8) & 255, packed & 255], axis=1)).tolist()
+    fill_codes = fill_codes.reshape(t, p)
     vis = _discrete("display", active.astype(np.int64), ["none", "inline"], kt, dur)
-    names_arr, fill_codes = np.unique(np.asarray(colors), return_inverse=True)
-    fills = _discrete("fill", fill_codes.reshape(t, p), names_arr.tolist(), kt, dur)
+    fills = _discrete("fill", fill_codes, names, kt, dur)
     strokes = [a.replace('"fill"', '"stroke"', 1) for a in fills]
     raw = _raw_strings(track.reshape(-1, 6))
     if chapter:
@@ -435,10 +452,8 @@ def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.nd
         text = _raw_strings(keys.values.transpose(1, 0, 2)[pk, fk] / 100.0)
         bounds = np.searchsorted(pk, np.arange(p + 1)).tolist()
         moving = _varying(pk, p, keys.values.transpose(1, 0, 2)[pk, fk])
-        kt_lin = key_times(np.arange(t + 1), t, 6)
         fkl = fk.tolist()
-    out = ['<g stroke-width="0.5" stroke-linejoin="round">']
-    ids = path_ids(tris)
+    out = []
     for j in range(p):
         if chapter and (not moving[j] or (bounds[j + 1] - bounds[j]) * 1.4 < t + 1):
             # keyTimes pay when many frames are still or hidden; on a moving triangle every frame is cheaper.
@@ -452,7 +467,8 @@ def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.nd
             first = vals[int(np.argmax(active[:, j]))]
             anim = (f'<animate attributeName="d" dur="{dur}" repeatCount="indefinite" values="{";".join(vals)}"/>'
                     if t > 1 else "")
-        attrs = f'id="{ids[j]}" d="{first}" fill="{colors[0][j]}" stroke="{colors[0][j]}"'
+        colour = names[fill_codes[0, j]]
+        attrs = f'id="{ids[j]}" d="{first}" fill="{colour}" stroke="{colour}"'
         if not active[0, j]:
             attrs += ' display="none"'  # not visibility: Inkscape draws visibility:hidden paths
         out.append(f"<path {attrs}>{anim}{vis[j]}{fills[j]}{strokes[j]}</path>")

@@ -32,7 +32,7 @@ from tests.svgrender import chromium_frame, iou
 ZOOM = 2.0
 MIN_SSIM = 0.99
 STILL_FRAME = 3
-CASES = ("sample", "gouraud", "still", "rigid")
+CASES = ("sample", "gouraud", "still", "rigid", "mobile")
 _ANIMATION = re.compile(rb"<(?:animate|animateTransform|animateMotion|set)\b[^>]*/>")
 
 
@@ -44,7 +44,8 @@ def outputs(sample_path) -> dict[str, bytes]:
     return {"sample": convert(sample_path, ConversionOptions()).data,
             "gouraud": convert(sample_path, ConversionOptions(shading="gouraud")).data,
             "still": convert(sample_path, ConversionOptions(frame=STILL_FRAME)).data,
-            "rigid": rigid.data}
+            "rigid": rigid.data,
+            "mobile": convert(sample_path, ConversionOptions(preset="mobile")).data}  # merged paths
 
 
 def _size(svg: bytes) -> tuple[int, int]:
@@ -121,7 +122,7 @@ def test_static_renderer_draws_frame_0_like_chromium(outputs, chromium_t0, artif
     assert score >= MIN_SSIM, f"{case}: {renderer} frame 0 SSIM {score:.4f} to Chromium at t = 0"
 
 
-@pytest.mark.parametrize("case", ["sample", "still", "rigid"])
+@pytest.mark.parametrize("case", ["sample", "still", "rigid", "mobile"])
 def test_static_attributes_are_frame_0(outputs, case):
     """The verifier's reading of the file with every animation removed is its frame 0, exactly."""
     svg = outputs[case]

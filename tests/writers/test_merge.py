@@ -9,7 +9,7 @@ from converter import formats
 from converter.encode import merge
 from converter.errors import InputError
 from converter.extract import extract, fit_camera
-from converter.options import ConversionOptions, Report
+from converter.options import PRESETS, ConversionOptions, Report
 from converter.verify import _triangles_of_d, evaluate, verify_animation
 from converter.writers import svg_anim
 from svgrender import chromium_frame, iou
@@ -125,3 +125,32 @@ def test_chromium_draws_merged_paths_like_single_ones(browser, sample, artifacts
                 from PIL import Image
 
                 Image.fromarray(np.concatenate([a, b], axis=1)).save(artifacts / "merged_paths.png")
+
+
+@pytest.mark.browser
+def test_mobile_preset_frame_structure_in_chromium(browser, sample_path):
+    """What makes the mobile preset cheap to play, as Chromium's DOM holds it: at most its budget of animated
+    paths, only d animations (no colour or class restyles), and the frames move."""
+    from converter.convert import convert
+
+    result = convert(sample_path, ConversionOptions(preset="mobile"))
+    budget = PRESETS["mobile"].values["max_animations"]
+    page = browser.new_page(viewport={"width": 256, "height": 256})
+    try:
+        page.set_content("<!doctype html><html><body style='margin:0'>" + result.data.decode() + "</body></html>")
+        counts = page.evaluate("""() => ({
+            paths: document.querySelectorAll('svg path').length,
+            animated: new Set([...document.querySelectorAll('svg animate')].map(a => a.parentElement)).size,
+            kinds: [...new Set([...document.querySelectorAll('svg animate')].map(
+                a => a.getAttribute('attributeName')))],
+            triangles: [...document.querySelectorAll('svg path')].reduce(
+                (n, p) => n + (p.getAttribute('d').match(/z/gi) || []).length, 0)})""")
+    finally:
+        page.close()
+    assert counts["paths"] == result.report.counts["paths"] <= budget
+    assert 0 < counts["animated"] <= budget
+    assert counts["kinds"] == ["d"]
+    assert counts["triangles"] == result.report.counts["triangles_kept"]
+    size = 256
+    frames = [chromium_frame(browser, result.data, t, size, size) for t in (0.0, 1.0, 2.0)]
+    assert all(np.abs(a.astype(int) - b.astype(int)).mean() > 0.3 for a, b in zip(frames, frames[1:]))
