@@ -4,9 +4,11 @@ Each case converts in a fresh child process (so its peak RSS is its own) with th
 capture-like face (bench/capture_like.py) and its longer and denser variants. Longer: the same generator with
 more frames. Denser: the 8k-triangle face split 1 -> 4 by edge midpoints (32k), twice (128k); the 2k face is
 the generator's own simplification. The naive writer (``naive_svg``, in its own child, after the same
-extraction) streams every kept triangle's coordinates at every frame with 2 decimals, numpy-formatted a block
-of paths at a time: ``--raw`` would be that writer, but it holds every string of the file at once (1.4 GB at
-8.5k triangles x 100 frames), which the long and dense cases cannot afford.
+extraction) streams every kept triangle's coordinates at every frame with 2 decimals, formatted a block of
+paths at a time. ``--raw`` (the chapter's unoptimised file: the same values plus colour and visibility
+animations) is measured too, up to 1,000 frames: it is also written a block of paths at a time, so its peak
+follows its output (it held every string of the file at once until today: 1.3 GB at 8k x 100 frames, 4.2 GB at
+8k x 335).
 
 FACESVG_BENCH_QUICK=1 runs only up to 1,000 frames and 32k triangles (the big cases cost minutes each).
 """
@@ -39,6 +41,7 @@ QUICK = os.environ.get("FACESVG_BENCH_QUICK", "") not in ("", "0")
 FRAME_CASES = ((100, 8000, 0), (FRAMES, 8000, 0), (1000, 8000, 0), (3000, 8000, 0))
 TRIANGLE_CASES = ((FRAMES, 2000, 0), (FRAMES, 8000, 0), (FRAMES, 8000, 1), (FRAMES, 8000, 2))
 QUICK_FRAMES, QUICK_TRIANGLES = 1000, 40000
+RAW_FRAMES = 1000  # --raw is measured up to this many frames (its file is ~0.35 GB at 1,000)
 TARGETS = "capture-like <= 7 s CPU and <= 350 MB; writer >= 1 M triangle-frames/s; 8k x 3,000 <= 60 s and " \
           "<= 2.5 GB; 128k x 336 <= 80 s and <= 4 GB; peak RSS <= 100 B per triangle-frame"
 
@@ -93,8 +96,8 @@ def naive_svg(sheet, sink, block: int = 256) -> int:
 
 
 def child(frames: int, triangles: int, subdivisions: int, mode: str) -> dict:
-    """Run in the child process: build the face, convert it (mode 'bounded', or 'naive': the same extraction
-    and naive_svg), report CPU (user+sys) and peak RSS."""
+    """Run in the child process: build the face, convert it (mode 'bounded', 'raw', or 'naive': the same
+    extraction and naive_svg), report CPU (user+sys) and peak RSS."""
     anim = face(frames, triangles, subdivisions)
     before_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     if mode == "naive":
@@ -118,7 +121,7 @@ def child(frames: int, triangles: int, subdivisions: int, mode: str) -> dict:
 
     kind.shading_writers["flat"] = timed
     c = time.process_time()
-    result = convert_animation(anim, ConversionOptions())
+    result = convert_animation(anim, ConversionOptions(raw=mode == "raw"))
     cpu = time.process_time() - c
     return {"triangles": anim.n_faces, "frames": anim.n_frames, "cpu": cpu, "writer_cpu": writer_cpu[0],
             "extract_cpu": cpu - writer_cpu[0], "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
@@ -159,6 +162,14 @@ def run() -> str:
                     f"{tf / b['writer_cpu'] / 1e6:.2f} | {b['peak_mb']:,.0f} | {b['peak_mb'] * 2 ** 20 / tf:.0f} | "
                     f"{r['cpu']:.1f} | {r['peak_mb']:,.0f} | {b['cpu'] / r['cpu']:.2f} | "
                     f"{b['bytes'] / 1e6:.1f} ({r['bytes'] / 1e6:.1f}) |")
+    raw_cases = [c for c in frame_cases if c[0] <= RAW_FRAMES]
+    rows += ["", "`--raw`, a block of paths at a time:", "",
+             "| case | CPU s | peak RSS MB | B per tri-frame | output MB |", "|---|---|---|---|---|"]
+    for case in raw_cases:
+        r = measure(*case, "raw")
+        tf = r["triangles"] * r["frames"]
+        rows.append(f"| {case[1] // 1000}k x {case[0]} | {r['cpu']:.1f} | {r['peak_mb']:,.0f} | "
+                    f"{r['peak_mb'] * 2 ** 20 / tf:.0f} | {r['bytes'] / 1e6:.1f} |")
     fx = [res[c][0]["frames"] for c in frame_cases]
     tx = [res[c][0]["triangles"] for c in tri_cases]
     grow = (f"Growth exponents (log-log fit of convert CPU): frames {_exponent(fx, [res[c][0]['cpu'] for c in frame_cases])}"
