@@ -51,7 +51,8 @@ COLOR_TIME_LEVELS = 0.1  # of which rounding the colour keyTimes may take
 COLOR_SLACK = 0.05  # levels kept free of evenly spaced colour keys (checked exactly, rounding included)
 BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime): what groups weigh
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
-RAW_COUNT_PATHS = 1024  # paths per block when writing the raw encoding or counting its bytes
+RAW_COUNT_PATHS = 1024  # paths per block when counting the raw encoding's bytes
+RAW_WRITE_PATHS = 128  # paths per block when writing it (its one format call holds 18 objects per tri-frame)
 
 
 def _hex(levels: np.ndarray) -> np.ndarray:
@@ -309,6 +310,8 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     report.counts["depth_conflicts"] = dl.conflicts
     report.counts["depth_conflicts_left"] = dl.residual
     report.counts["layer_copies"] = int(len(tris) - len(np.unique(tris)))
+    if mode in ("raw", "chapter"):  # already bytes, a block of paths each: joined once, never as one str
+        return b"\n".join(["\n".join(head).encode("utf-8"), *body, b"</g></svg>\n"])
     return ("\n".join(head + body) + "\n</g></svg>\n").encode("utf-8")
 
 
@@ -415,20 +418,23 @@ def raw_values_bytes(track: np.ndarray) -> int:
 
 
 def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.ndarray, dur: str,
-                chapter: bool = False) -> list[str]:
+                chapter: bool = False) -> list[bytes]:
     """The raw file: every frame's coordinates (2 decimals) as evenly spaced values (frame k at k/T, the last
     held to T); fill, stroke and display as discrete animations where they change. With chapter=True the
     chapter's post-optimisations: coordinates only at frames that need them (nothing while hidden, a still
-    run reduced to its two ends) placed with keyTimes, exact to 2 decimals. Written RAW_COUNT_PATHS paths at a
-    time, so the texts of every frame of every path never exist at once (memory follows the output)."""
+    run reduced to its two ends) placed with keyTimes, exact to 2 decimals. Written RAW_WRITE_PATHS paths at a
+    time, each block's lines joined into bytes at once, so the texts of every frame of every path never exist
+    at once as strings (memory follows the output)."""
     t, p = active.shape
     kt = key_times(np.arange(t + 1), t, 6, "early")
     kt_lin = key_times(np.arange(t + 1), t, 6) if chapter else []
-    out = ['<g stroke-width="0.5" stroke-linejoin="round">']
+    out = [b'<g stroke-width="0.5" stroke-linejoin="round">']
     ids = path_ids(tris)
-    for a in range(0, p, RAW_COUNT_PATHS):
-        sl = slice(a, a + RAW_COUNT_PATHS)
-        out += _raw_block(sheet.face_rgb[:, tris[sl]], active[:, sl], track[:, sl], ids[sl], kt, kt_lin, dur, chapter)
+    for a in range(0, p, RAW_WRITE_PATHS):
+        sl = slice(a, a + RAW_WRITE_PATHS)
+        lines = _raw_block(sheet.face_rgb[:, tris[sl]], active[:, sl], track[:, sl], ids[sl], kt, kt_lin, dur,
+                           chapter)
+        out.append("\n".join(lines).encode("utf-8"))
     return out
 
 
