@@ -53,7 +53,7 @@ class Verification:
     mismatch_frames: int  # frames with at least one visibility mismatch
     tolerance: float
     frames: int
-    paths: int
+    paths: int  # triangles drawn (a merged path draws several)
     triangles: int
     dropped_visible: int  # front-facing triangles absent from the file (never seen: occlusion pass)
     worst: dict[str, Any] = field(default_factory=dict)
@@ -66,7 +66,7 @@ class Verification:
     def summary(self) -> str:
         """One line for the CLI."""
         return (f"max {self.max_px:.4f} px, mean {self.mean_px:.4f} px over {self.vertex_frames} drawn vertex-frames "
-                f"({self.paths} paths, {self.frames} frames); visibility mismatches {self.visibility_mismatches} "
+                f"({self.paths} triangles, {self.frames} frames); visibility mismatches {self.visibility_mismatches} "
                 f"in {self.mismatch_frames} frames; tolerance {self.tolerance:g} px: {'OK' if self.ok else 'FAIL'}")
 
 
