@@ -51,7 +51,7 @@ def small_data() -> Path:
 
 
 def pytest_collection_modifyitems(config, items):
-    # A test that asks for the full data sets is a `shared` test and one that drives Chromium a `browser` test,
+    # A test that asks for the full data sets is a `shared` test and one that drives a browser a `browser` test,
     # whether or not it carries the marker, so `-m "not shared"` and `make test-fast` deselect them.
     for item in items:
         names = getattr(item, "fixturenames", ())
@@ -59,6 +59,10 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.shared)
         if "browser" in names and not item.get_closest_marker("browser"):
             item.add_marker(pytest.mark.browser)
+        if {"firefox", "webkit"} & set(names):  # the other engines: `browser` tests too, and `engines`
+            for marker in ("browser", "engines"):
+                if not item.get_closest_marker(marker):
+                    item.add_marker(getattr(pytest.mark, marker))
         # The web tests run on both queue backends; the RQ run (redis-server, a worker process, a forked work
         # horse per job) repeats the embedded run's checks and costs several times more, so it is `slow`.
         callspec = getattr(item, "callspec", None)
@@ -141,6 +145,38 @@ def launched_chromium(exe: str):
             yield b
         finally:
             b.close()
+
+
+def require_engine(what: str, package: str) -> None:
+    """Skip the calling test for a missing browser engine; fail instead when CI is set (.ci/run installs it)."""
+    if os.environ.get("CI"):
+        pytest.fail(f"{what} is not installed but CI is set: .ci/run must install it ({package})")
+    pytest.skip(f"{what} not installed (apt-get install {package})")
+
+
+@pytest.fixture(scope="session")
+def firefox():
+    """A headless Firefox ESR session over Marionette (tests/engines.py); skips locally without it, fails in CI."""
+    from engines import firefox_path, launched_firefox
+
+    exe = firefox_path()
+    if not exe:
+        require_engine("Firefox ESR", "firefox-esr")
+    with launched_firefox(exe) as session:
+        yield session
+
+
+@pytest.fixture(scope="session")
+def webkit():
+    """A WebKitGTK MiniBrowser session under WebKitWebDriver and Xvfb (tests/engines.py); skips locally without
+    them, fails in CI."""
+    from engines import launched_webkit, webkit_paths
+
+    paths = webkit_paths()
+    if not paths:
+        require_engine("WebKitGTK's WebKitWebDriver and MiniBrowser, or Xvfb,", "webkit2gtk-driver xvfb")
+    with launched_webkit(*paths) as session:
+        yield session
 
 
 ARTIFACTS = ROOT / ".artifacts"
