@@ -275,6 +275,18 @@ def colour_difference(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.abs(a[..., :3].astype(np.int16) - b[..., :3].astype(np.int16))[both].mean())
 
 
+def over_white(rgba: np.ndarray) -> np.ndarray:
+    """RGB float of RGBA frames composited over white."""
+    a = rgba[..., 3:4] / 255.0
+    return rgba[..., :3] * a + 255.0 * (1 - a)
+
+
+def distances(got: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """(N, M) mean RGB difference over white between each of N frames and each of M reference frames."""
+    a, b = over_white(got), over_white(ref)
+    return np.array([[float(np.abs(x - y).mean()) for y in b] for x in a])
+
+
 def player_frames(session: Session, html: bytes, times: Sequence[float]) -> tuple[dict, np.ndarray]:
     """The player page's state ({state, renderer, error}) once it has loaded, and RGB shots of its canvas at each
     time (none when it shows an error)."""

@@ -13,7 +13,7 @@ from converter import formats
 from converter.extract import extract, fit_camera
 from converter.options import ConversionOptions, Report
 from converter.writers import player
-from engines import SVG_OUTPUTS, colour_difference, player_frames, svg_frames
+from engines import SVG_OUTPUTS, colour_difference, distances, over_white, player_frames, svg_frames
 from svgrender import chromium_frames, iou
 
 pytestmark = [pytest.mark.browser, pytest.mark.engines]
@@ -57,14 +57,9 @@ def chromium(browser, files, times) -> dict[str, np.ndarray]:
     return {kind: chromium_frames(browser, data, times, SIZE, SIZE) for kind, data in files.items()}
 
 
-def _over_white(rgba: np.ndarray) -> np.ndarray:
-    a = rgba[..., 3:4] / 255.0
-    return rgba[..., :3] * a + 255.0 * (1 - a)
-
-
 def _save(path, *rows: np.ndarray) -> None:
     """Frames side by side, one row per renderer, over white."""
-    Image.fromarray(np.concatenate([np.concatenate(list(_over_white(r)), 1) for r in rows], 0).astype(np.uint8)
+    Image.fromarray(np.concatenate([np.concatenate(list(over_white(r)), 1) for r in rows], 0).astype(np.uint8)
                     ).save(path)
 
 
@@ -77,15 +72,13 @@ def _check(engine: str, kind: str, got: np.ndarray, ref: np.ndarray, times: list
         assert diff <= COLOUR_MAX, f"{engine}, {kind}, t={t:.3f} s: mean colour difference {diff:.2f}"
     # It plays the animation: its frames differ from each other, and each is nearest Chromium's at its own time
     # (an engine that drew frame 0 at every time, or ignored keyTimes, fails here).
-    white, white_ref = _over_white(got), _over_white(ref)
+    moved, to_chromium = distances(got, got), distances(got, ref)
     for i in range(len(times)):
         for j in range(i + 1, len(times)):
-            moved = np.abs(white[i] - white[j]).mean()
-            assert moved > MOVES, f"{engine}, {kind}: frames at {times[i]:.3f} and {times[j]:.3f} s are the same"
-        distance = [float(np.abs(white[i] - white_ref[j]).mean()) for j in range(len(times))]
-        nearest = int(np.argmin(distance))
+            assert moved[i, j] > MOVES, f"{engine}, {kind}: frames at {times[i]:.3f} and {times[j]:.3f} s are the same"
+        nearest = int(np.argmin(to_chromium[i]))
         assert nearest == i, (f"{engine}, {kind}: t={times[i]:.3f} s looks like Chromium's t={times[nearest]:.3f} s "
-                              f"(mean differences {[round(d, 2) for d in distance]})")
+                              f"(mean differences {to_chromium[i].round(2).tolist()})")
 
 
 @pytest.mark.parametrize("kind", SVG_OUTPUTS)
@@ -109,7 +102,7 @@ def test_engine_plays_the_player(request, engine, sample, chromium, times, artif
     html = player.write(sample[1], ConversionOptions(size=SIZE, to="player"), Report())
     state, got = player_frames(request.getfixturevalue(engine), html, times)
     assert state["state"] == "ready", f"{engine} shows the player's message: {state['error']}"
-    ref = _over_white(chromium["flat"])  # the SVG of the same conversion, on the player's white page
+    ref = over_white(chromium["flat"])  # the SVG of the same conversion, on the player's white page
     Image.fromarray(np.concatenate([np.concatenate(list(got), 1), np.concatenate(list(ref), 1).astype(np.uint8)],
                                    0)).save(artifacts / f"engines_{engine}_player_{state['renderer']}.png")
     for i, t in enumerate(times):
