@@ -1,8 +1,8 @@
 """Fewer animated elements: runs of paths of one static colour merged into one <path> of several subpaths.
 
 A player's cost per frame grows with the number of animated elements (bench_playback: the mobile-preset
-capture-like face plays at about 16 fps at 4x CPU throttling with its 871 paths, and at about 40 fps with the
-same triangles in 300 paths). Under an explicit budget (``--max-animations N``) the flat SVG writer merges
+capture-like face plays in Chromium at about 13 fps at 4x CPU throttling with its 871 paths, 28 with the same
+triangles in 300 paths). Under an explicit budget (``--max-animations N``) the flat SVG writer merges
 paths that:
 
 - sit in the same group (the rigid planner's runs, converter.encode.groups), so one transform moves them all;
