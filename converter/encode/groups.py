@@ -40,7 +40,6 @@ through ``Costs``.
 
 from __future__ import annotations
 
-import heapq
 import math
 from collections.abc import Callable
 from typing import NamedTuple
@@ -54,6 +53,7 @@ from scipy.sparse.linalg import LinearOperator, eigsh
 from converter.encode import freeknots
 from converter.encode import keys as keyframes
 from converter.encode.budget import ErrorBudget
+from converter.encode.order import greedy_order
 from converter.encode.overlap import overlap_pairs
 
 HEAD_CLUSTERS = 24  # motion clusters of the largest band (the head)
@@ -354,29 +354,8 @@ def reorder(band: np.ndarray, pairs: np.ndarray) -> np.ndarray:
     by_band = np.lexsort((np.arange(p), band))
     same = band[by_band[1:]] == band[by_band[:-1]]
     chain = np.column_stack([by_band[:-1][same], by_band[1:][same]])
-    code = np.unique(np.concatenate([np.asarray(pairs, np.int64).reshape(-1, 2), chain]) @ np.array([p, 1]))
-    pairs = np.column_stack([code // p, code % p])
-    succ = sparse.csr_matrix((np.ones(len(pairs), bool), (pairs[:, 0], pairs[:, 1])), shape=(p, p))
-    indeg = np.bincount(pairs[:, 1], minlength=p) if len(pairs) else np.zeros(p, np.int64)
-    heaps: dict[int, list[int]] = {}
-    for i in np.flatnonzero(indeg == 0).tolist():
-        heaps.setdefault(int(band[i]), []).append(i)
-    for h in heaps.values():
-        heapq.heapify(h)
-    order: list[int] = []
-    cur = -1
-    indptr, indices = succ.indptr, succ.indices
-    bl = band.tolist()
-    while len(order) < p:
-        if not heaps.get(cur):
-            cur = min((h[0], b) for b, h in heaps.items() if h)[1]  # the band whose next path is earliest
-        i = heapq.heappop(heaps[cur])
-        order.append(i)
-        for j in indices[indptr[i]:indptr[i + 1]].tolist():
-            indeg[j] -= 1
-            if indeg[j] == 0:
-                heapq.heappush(heaps.setdefault(bl[j], []), j)
-    return np.array(order, np.int64)
+    return greedy_order(band, np.concatenate([np.asarray(pairs, np.int64).reshape(-1, 2), chain]),
+                        lambda free: min((h[0], b) for b, h in free.items() if h)[1])
 
 
 # --- layout and plan --------------------------------------------------------------------------------------------

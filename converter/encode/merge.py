@@ -22,14 +22,12 @@ what the budget costs.
 
 from __future__ import annotations
 
-import heapq
 from typing import NamedTuple
 
 import numpy as np
 from PIL import Image
-from scipy import sparse
 
-from converter.encode.order import OVERLAP_MARGIN_PX
+from converter.encode.order import OVERLAP_MARGIN_PX, greedy_order
 from converter.encode.overlap import overlap_pairs
 
 PALETTES = (256, 128, 64, 48, 32, 24, 16)  # colours of the merged paths' palette tried, finest first
@@ -85,28 +83,7 @@ def by_runs(key: np.ndarray, pairs: np.ndarray) -> np.ndarray:
     long runs of one key: it continues the current key while one of its paths is free, then takes the key with
     the most free paths (the earliest on ties). Paths of one key need no order among themselves: one colour
     over itself looks the same either way."""
-    p = len(key)
-    code = np.unique(np.asarray(pairs, np.int64).reshape(-1, 2) @ np.array([p, 1]))
-    pairs = np.column_stack([code // p, code % p])
-    succ = sparse.csr_matrix((np.ones(len(pairs), bool), (pairs[:, 0], pairs[:, 1])), shape=(p, p))
-    indeg = np.bincount(pairs[:, 1], minlength=p) if len(pairs) else np.zeros(p, np.int64)
-    free: dict[int, list[int]] = {}
-    for i in np.flatnonzero(indeg == 0).tolist():
-        heapq.heappush(free.setdefault(int(key[i]), []), i)
-    order: list[int] = []
-    cur = None
-    indptr, indices = succ.indptr, succ.indices
-    kl = key.tolist()
-    while len(order) < p:
-        if not free.get(cur):
-            cur = max((len(h), -h[0], k) for k, h in free.items() if h)[2]
-        i = heapq.heappop(free[cur])
-        order.append(i)
-        for j in indices[indptr[i]:indptr[i + 1]].tolist():
-            indeg[j] -= 1
-            if indeg[j] == 0:
-                heapq.heappush(free.setdefault(kl[j], []), j)
-    return np.array(order, np.int64)
+    return greedy_order(key, pairs, lambda free: max((len(h), -h[0], k) for k, h in free.items() if h)[2])
 
 
 def _sets(segment: np.ndarray, key: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

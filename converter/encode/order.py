@@ -25,9 +25,12 @@ the default is the fixed order; see BENCHMARKS.md for the figures.
 
 from __future__ import annotations
 
+import heapq
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
+from scipy import sparse
 
 from converter.encode.overlap import overlap_pairs
 from converter.sheet import Sheet
@@ -59,6 +62,34 @@ def overlapping_pairs(sheet: Sheet, tris: np.ndarray, frames: np.ndarray,
     pairs = overlap_pairs(sheet.xy[fr][:, f], shown[fr], block=1, margin=-OVERLAP_MARGIN_PX)
     shared = (f[pairs[:, 0], :, None] == f[pairs[:, 1], None, :]).any(axis=(1, 2))
     return pairs[~shared]
+
+
+def greedy_order(key: np.ndarray, pairs: np.ndarray, switch: Callable[[dict[int, list[int]]], int]) -> np.ndarray:
+    """A topological order (permutation) of paths with keys (P,) keeping every pair (first before second) that
+    draws runs of one key: the current key goes on while one of its paths is free (the lowest index first),
+    then switch(free) names the next key (free: key -> heap of its free paths, some empty)."""
+    p = len(key)
+    code = np.unique(np.asarray(pairs, np.int64).reshape(-1, 2) @ np.array([p, 1]))
+    pairs = np.column_stack([code // p, code % p])
+    succ = sparse.csr_matrix((np.ones(len(pairs), bool), (pairs[:, 0], pairs[:, 1])), shape=(p, p))
+    indeg = np.bincount(pairs[:, 1], minlength=p) if len(pairs) else np.zeros(p, np.int64)
+    free: dict[int, list[int]] = {}
+    for i in np.flatnonzero(indeg == 0).tolist():
+        heapq.heappush(free.setdefault(int(key[i]), []), i)
+    order: list[int] = []
+    cur = None
+    indptr, indices = succ.indptr, succ.indices
+    kl = key.tolist()
+    while len(order) < p:
+        if not free.get(cur):
+            cur = switch(free)
+        i = heapq.heappop(free[cur])
+        order.append(i)
+        for j in indices[indptr[i]:indptr[i + 1]].tolist():
+            indeg[j] -= 1
+            if indeg[j] == 0:
+                heapq.heappush(free.setdefault(kl[j], []), j)
+    return np.array(order, np.int64)
 
 
 def sample_frames(n_frames: int) -> np.ndarray:
