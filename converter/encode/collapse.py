@@ -99,14 +99,19 @@ def fold(keys: Keys, active: np.ndarray) -> Timeline:
     dup = np.zeros(len(path), bool)
     dup[1:] = (path[1:] == path[:-1]) & (half[1:] == half[:-1])  # an edge frame that was already a key
     path, half, values, collapsed = path[~dup], half[~dup], values[~dup], collapsed[~dup]
-    same_prev = np.zeros(len(path), bool)
-    same_prev[1:] = path[1:] == path[:-1]
-    same_next = np.zeros(len(path), bool)
-    same_next[:-1] = path[1:] == path[:-1]
-    after_c = same_prev & np.roll(collapsed, 1) & ~collapsed
-    before_c = same_next & np.roll(collapsed, -1) & ~collapsed
-    snap = np.zeros(len(path), np.int8)
-    snap[after_c] = -1
-    snap[before_c] = 1
-    snap[after_c & before_c] = -2
-    return Timeline(path, half, values, collapsed, snap)
+    same = path[1:] == path[:-1]
+    return Timeline(path, half, values, collapsed, snaps(collapsed, same))
+
+
+def snaps(collapsed: np.ndarray, same: np.ndarray) -> np.ndarray:
+    """Each key's snap (module docstring) from whether keys (K, ...) are collapses, along axis 0; same (K - 1,
+    ...): keys i and i + 1 belong to one path."""
+    prev = np.zeros_like(collapsed)
+    prev[1:] = collapsed[:-1] & same
+    after = np.zeros_like(collapsed)
+    after[:-1] = collapsed[1:] & same
+    snap = np.zeros(collapsed.shape, np.int8)
+    snap[prev & ~collapsed] = -1
+    snap[after & ~collapsed] = 1
+    snap[prev & after & ~collapsed] = -2
+    return snap

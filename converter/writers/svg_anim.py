@@ -371,11 +371,7 @@ def _merged_geometry(track: np.ndarray, active: np.ndarray, radius: np.ndarray, 
         v[:, n:] = v[:, n - 1:n]
         pts = v.reshape(len(h), width, 3, 2)
         point = (pts == pts[:, :, :1]).all(axis=(2, 3))  # (K, M) the path is collapsed at the key
-        after = np.zeros_like(point)
-        before = np.zeros_like(point)
-        after[1:] = point[:-1] & ~point[1:]
-        before[:-1] = point[1:] & ~point[:-1]
-        s = np.where(after & before, -2, np.where(after, -1, np.where(before, 1, 0)))
+        s = collapse.snaps(point, np.ones((len(h) - 1, 1), bool))
         worst = np.where((s == -2).any(axis=1) | ((s == -1).any(axis=1) & (s == 1).any(axis=1)), -2,
                          np.where((s == -1).any(axis=1), -1, np.where((s == 1).any(axis=1), 1, 0)))
         paths.append(np.full(len(h), k))
