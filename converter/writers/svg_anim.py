@@ -603,6 +603,9 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     enc = {"scale": view_scale, "tolerance": tol, "fit_px": round(float(np.min(radius)), 6),
            "color_levels": color_tol, "hidden": "collapsed",
            "keytime_decimals": [int(decimals.min()), int(decimals.max())] if len(decimals) else []}
+    starts = np.arange(p + 1) if joined is None else joined.starts
+    sets = [(a, b) for a, b in zip(starts[:-1].tolist(), starts[1:].tolist()) if b - a > 1]
+    inside = np.concatenate([np.arange(a, b) for a, b in sets]) if sets else np.zeros(0, np.int64)  # merged
     # Geometry.
     moving = _varying(pk, p, rows)
     off = offsets(rows, pk, p)
@@ -612,6 +615,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     counts = np.bincount(pk, minlength=p)
     d_len = np.array([len(a) for a in d_anims])
     d_len[~active.all(axis=0)] = 0  # evenly spaced keys cannot collapse a hidden triangle
+    d_len[inside] = 0  # a merged path's d is keyed for all its triangles together (_merged_geometry)
     per_key = np.bincount(pk, np.fromiter(map(len, text), np.float64, len(text)), p) / np.maximum(counts, 1)
     d_uniform = _uniform_instead("d", track, active, counts, d_len, per_key, view_scale,
                                  bound, True, lambda v, j: _path_strings(v, np.broadcast_to(off[j], (len(v), 2))),
@@ -620,11 +624,8 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
         d_first[j] = _path_strings(d_uniform[j][:1], off[j:j + 1])[0]
     # Colour: linear keys within the colour tolerance; the first key's colour is the path's class.
     ckeys = color_keys(sheet.face_rgb[:, tris], active, color_tol)
-    starts = np.arange(p + 1) if joined is None else joined.starts
-    sets = [(a, b) for a, b in zip(starts[:-1].tolist(), starts[1:].tolist()) if b - a > 1]
     if sets:  # a merged path's one static colour (its code's), and its d keyed for all its triangles together
         levels = joined.levels
-        inside = np.concatenate([np.arange(a, b) for a, b in sets])
         ckeys.mask[:, inside] = False
         ckeys.mask[0, inside] = ckeys.mask[t, inside] = True
         ckeys.values[0, inside] = ckeys.values[t, inside] = levels[inside]
