@@ -58,18 +58,20 @@ def add_conversion_options(p: argparse.ArgumentParser) -> None:
     for spec in option_fields():
         if spec.type is bool:
             action = "store_false" if spec.default else "store_true"
-            p.add_argument(spec.flag, dest=spec.name, action=action, help=_help(spec))
+            p.add_argument(spec.flag, dest=spec.name, action=action, default=argparse.SUPPRESS, help=_help(spec))
             continue
         kinds = choices(spec)
-        p.add_argument(spec.flag, dest=spec.name, type=spec.type, default=spec.default,
+        # SUPPRESS: a flag not given stays out of the Namespace, so a preset fills it even where it was given at
+        # its default value (which then stays).
+        p.add_argument(spec.flag, dest=spec.name, type=spec.type, default=argparse.SUPPRESS,
                        choices=list(kinds) if kinds else None, help=_help(spec),
                        metavar="FILE" if spec.meta.path else None)
 
 
 def options_from_args(args: argparse.Namespace) -> ConversionOptions:
-    """ConversionOptions from parsed arguments (only the fields the parser has)."""
+    """ConversionOptions from parsed arguments (only the flags given; a --preset fills the others)."""
     names = {spec.name for spec in option_fields()}
-    return ConversionOptions(**{k: v for k, v in vars(args).items() if k in names and v is not None})
+    return ConversionOptions.given(**{k: v for k, v in vars(args).items() if k in names and v is not None})
 
 
 def cmd_convert(args: argparse.Namespace) -> int:

@@ -106,7 +106,7 @@ def option(default, help: str, **meta):
 class ConversionOptions:
     """Every conversion knob, with defaults that give a good result."""
 
-    preset: str | None = option(None, "a named set of option values; options left at their default take the "
+    preset: str | None = option(None, "a named set of option values; the options you do not set take the "
                                 "preset's: " + "; ".join(f"{k}: {p.description}" for k, p in PRESETS.items()),
                                 label="Preset", choices={k: p.label for k, p in PRESETS.items()}, unset="none",
                                 form=False)
@@ -192,6 +192,15 @@ class ConversionOptions:
         if self.end is not None and self.end <= self.start:
             raise InputError("the frame range is empty; --end must be greater than --start and --start >= 0.")
 
+    @classmethod
+    def given(cls, **values: Any) -> ConversionOptions:
+        """Options from the values a caller set explicitly: a preset fills only the others, so a value given
+        equal to its default stays (the constructor alone cannot tell it from one left unset)."""
+        options = cls(**values)
+        for name, value in values.items():  # only fields the preset moved off their default differ here
+            object.__setattr__(options, name, value)
+        return options
+
     def to_json(self) -> dict:
         """Plain dict of every option."""
         return asdict(self)
@@ -208,7 +217,7 @@ class ConversionOptions:
             if value is None or value == "":
                 continue
             kwargs[key] = _coerce(key, known[key].type, value)
-        return cls(**kwargs)
+        return cls.given(**kwargs)
 
 
 def _coerce(name: str, type_name: str, value):

@@ -152,3 +152,21 @@ def test_progress_bar_shows_an_eta_from_the_progress_so_far(monkeypatch, capsys)
     assert "ETA 0:12" in err.split("\r")[2] and "ETA 0:12" in err.split("\r")[3]
     assert "ETA" not in err.split("\r")[1]
     assert seconds_left(10.0, 0.01) is None and seconds_left(30.0, 0.5) == 30.0
+
+
+def test_preset_fills_only_the_flags_not_given():
+    """--preset mobile --size 512 keeps 512 although 512 is the default; what is not given comes from the preset."""
+    import argparse
+
+    from converter.cli import add_conversion_options, options_from_args
+    from converter.options import PRESETS
+
+    p = argparse.ArgumentParser()
+    add_conversion_options(p)
+    mobile = PRESETS["mobile"].values
+    o = options_from_args(p.parse_args(["--preset", "mobile", "--size", "512", "--tolerance", "0.25"]))
+    assert (o.size, o.tolerance) == (512, 0.25)
+    assert (o.max_triangles, o.max_animations) == (mobile["max_triangles"], mobile["max_animations"])
+    assert options_from_args(p.parse_args(["--preset", "mobile"])).size == mobile["size"]
+    d = options_from_args(p.parse_args([]))
+    assert (d.size, d.rigid, d.occlusion) == (512, True, True)

@@ -82,6 +82,10 @@ def test_mobile_preset_fills_defaults_only():
     assert all(getattr(o, k) == v for k, v in mobile.items())
     assert ConversionOptions(preset="mobile", size=300).size == 300
     assert ConversionOptions.from_mapping({"preset": "mobile"}).max_triangles == mobile["max_triangles"]
+    # A value given explicitly stays even when it equals the default (the CLI, the API and the form say so).
+    assert ConversionOptions.from_mapping({"preset": "mobile", "size": 512}).size == 512
+    given = ConversionOptions.given(preset="mobile", tolerance=0.25, max_animations=None)
+    assert (given.tolerance, given.max_animations, given.size) == (0.25, None, mobile["size"])
     with pytest.raises(InputError):
         ConversionOptions(preset="tiny")
 
