@@ -107,10 +107,21 @@ class Layout(NamedTuple):
     band: np.ndarray  # int (P,) band of each path, in the new order
     runs: np.ndarray  # int (R + 1,) start of each run of same-band paths, then P
     motions: tuple[BandMotion, ...]  # per band
-    local: np.ndarray  # float64 (T, P, 6) path vertices in their band's local px (relative to the centroid)
     gain: np.ndarray  # float64 (P,) error gain of each path's band, head transform included
     head: BandMotion  # the head's transform: the outermost group, around every path
     head_local: np.ndarray  # float64 (T, P, 6) path vertices in the head's local px
+
+    def band_local(self, sel: np.ndarray) -> np.ndarray:
+        """Paths sel's vertices (T, len(sel), 6) in their band's local px (relative to its centroid), worked out
+        for the paths asked (a whole (T, P, 6) copy would double the plan's memory)."""
+        t = self.head_local.shape[0]
+        out = np.empty((t, len(sel), 6))
+        band = self.band[sel]
+        for b in np.unique(band).tolist():
+            at = np.flatnonzero(band == b)
+            pts = self.head_local[:, sel[at]].reshape(t, len(at), 3, 2)
+            out[:, at] = local_tracks(pts, self.motions[b].matrices).reshape(t, len(at), 6)
+        return out
 
 
 class Plan(NamedTuple):
@@ -388,17 +399,13 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
         order = reorder(band, overlap_pairs(xy64[:, faces[tris]], active, band=band))
     band = band[order]
     path_head = in_head[:, faces[tris[order]]]  # (T, P, 3, 2) head frame
-    local = np.zeros((t, len(tris), 3, 2))
     gains = np.zeros(len(band_ids))
     for b, m in enumerate(motions):
-        sel = np.flatnonzero(band == b)
-        local[:, sel] = local_tracks(path_head[:, sel], m.matrices)
         lin = np.einsum("tij,tjk->tik", head.matrices[:, :, :2], m.matrices[:, :, :2])
         gains[b] = float(np.linalg.svd(lin, compute_uv=False).max()) if t else 1.0
     change = np.flatnonzero(np.diff(band)) + 1
     runs = np.concatenate([[0], change, [len(tris)]]).astype(np.int64)
-    return Layout(order, band, runs, tuple(motions), local.reshape(t, len(tris), 6), gains[band], head,
-                  path_head.reshape(t, len(tris), 6))
+    return Layout(order, band, runs, tuple(motions), gains[band], head, path_head.reshape(t, len(tris), 6))
 
 
 def _motion(xy: np.ndarray, verts: np.ndarray, neutral: int, slack: float, scale: int,
@@ -428,14 +435,16 @@ def _motions(xy: np.ndarray, vert_sets: list[np.ndarray], neutral: int, slack: f
 
 
 def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, tris: np.ndarray,
-         active: np.ndarray, track: np.ndarray, budget: ErrorBudget, costs: Costs,
-         head_clusters: int = HEAD_CLUSTERS, merge_runs: bool = True) -> Plan:
+         active: np.ndarray, budget: ErrorBudget, costs: Costs, head_clusters: int = HEAD_CLUSTERS,
+         merge_runs: bool = True) -> Plan:
     """Rigid layout for the bounded encoder: the head group around everything, which runs of paths go under a
     band's group inside it, and their tracks.
 
     A run is wrapped only when the keys it saves (band-local against head-local keyframe counts, at costs.key
     bytes each) outweigh its group (costs.transform of its band plus costs.close); the other paths sit in the
-    head's frame. When even that costs more than the plain encoding (global keys), nothing is grouped."""
+    head's frame. When even that costs more than the plain encoding (global keys), nothing is grouped.
+    Band-local tracks and keys are worked out a block of runs at a time and kept only where they win, so the
+    plan holds one track and one set of keys per path."""
     t, p = active.shape
     lay = layout(xy, faces, part_ids, neutral, tris, active, budget, head_clusters=head_clusters,
                  merge_runs=merge_runs)
@@ -447,66 +456,87 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
 
     def keys_of(x, r, cols=slice(None)):
         # Squares only: which paths to wrap is decided on these; the other shapes refine the chosen tracks below.
-        return freeknots.point_keys(x[:, cols], act[:, cols], np.broadcast_to(np.maximum(r, 1e-6), (p,))[cols],
+        return freeknots.point_keys(x, act[:, cols], np.broadcast_to(np.maximum(r, 1e-6), (p,))[cols],
                                     freeknots.SHAPES_DEG[:1])
 
-    kh = keys_of(lay.head_local, r_head)
-    kh_n = kh.mask.sum(axis=0)
+    out_track = lay.head_local  # head-local tracks, replaced in place by band-local ones where a run is wrapped
+    keys = keys_of(out_track, r_head)
+    kh_n = keys.mask.sum(axis=0)
     group_bytes = [costs.transform(m) for m in lay.motions]
     runs = list(zip(lay.runs[:-1].tolist(), lay.runs[1:].tolist()))
 
     def pays(a: int, saved_bytes: float) -> bool:  # wrapping run a..: its band's group, once more
         return bool(ok[a]) and saved_bytes > group_bytes[int(lay.band[a])] + costs.close
 
-    # A run saves at most its head-local keys: band-local keys are worked out only where that could pay.
-    maybe = np.zeros(p, bool)
-    for a, b in runs:
-        maybe[a:b] = pays(a, kh_n[a:b].sum() * costs.key)
-    cand = np.flatnonzero(maybe)
-    kl = keys_of(lay.local, r_local, cand)
-    kl_n = kh_n.copy()
-    kl_n[cand] = kl.mask.sum(axis=0)
     # The plain encoding's key count only decides whether grouping pays: estimated from every PLAIN_SAMPLE-th path.
     sample = np.arange(0, p, PLAIN_SAMPLE if p >= 50 * PLAIN_SAMPLE else 1)
-    plain = freeknots.point_keys(np.asarray(track[:, lay.order[sample]], np.float64), act[:, sample],
+    plain = freeknots.point_keys(_tracks(xy, faces, tris[lay.order[sample]]), act[:, sample],
                                  np.broadcast_to(max(global_radius, 1e-6), (p,))[sample], freeknots.SHAPES_DEG[:1])
     plain_keys = int(round(plain.mask.sum() * p / len(sample)))
     del plain
-    saved = (kh_n - kl_n) * costs.key
+    # A run saves at most its head-local keys: band-local keys are worked out only where that could pay.
+    maybe = [(a, b) for a, b in runs if pays(a, kh_n[a:b].sum() * costs.key)]
+    kl_n = kh_n.copy()
     wrapped_runs = []
     wrapped = np.zeros(p, bool)
-    for a, b in runs:
-        if pays(a, saved[a:b].sum()):
-            wrapped_runs.append((a, b))
-            wrapped[a:b] = True
+    for block in _run_blocks(maybe, freeknots.BLOCK_TRACKS):
+        cand = np.concatenate([np.arange(a, b) for a, b in block])
+        local = lay.band_local(cand)
+        kl = keys_of(local, r_local, cand)
+        kl_n[cand] = kl.mask.sum(axis=0)
+        won = np.zeros(len(cand), bool)
+        at = 0
+        for a, b in block:
+            if pays(a, (kh_n[a:b] - kl_n[a:b]).sum() * costs.key):
+                wrapped_runs.append((a, b))
+                won[at:at + b - a] = True
+            at += b - a
+        w = cand[won]
+        wrapped[w] = True
+        out_track[:, w] = local[:, won]
+        keys.mask[:, w], keys.values[:, w] = kl.mask[:, won], kl.values[:, won]
+        del local, kl
+    stats = {"bands": len(lay.motions), "runs": len(lay.runs) - 1, "groups": len(wrapped_runs),
+             "grouped_paths": int(wrapped.sum()), "keys_global": plain_keys,
+             "max_gain": float(max(lay.gain.max(), lay.head.gain)) if p else 1.0}
     head_bytes = costs.transform(lay.head)
     n_keys = np.where(wrapped, kl_n, kh_n)
     transform_bytes = head_bytes + sum(group_bytes[int(lay.band[a])] for a, _ in wrapped_runs)
     grouped_cost = int(n_keys.sum()) * costs.key + transform_bytes
-    stats = {"bands": len(lay.motions), "runs": len(lay.runs) - 1, "groups": len(wrapped_runs),
-             "grouped_paths": int(wrapped.sum()), "keys_global": plain_keys,
-             "max_gain": float(max(lay.gain.max(), lay.head.gain)) if p else 1.0}
     if grouped_cost >= plain_keys * costs.key:  # the plain encoding is shorter: no groups
+        del keys, out_track
+        lay = lay._replace(head_local=None)
         stats.update(groups=0, grouped_paths=0, transform_bytes=0, keys_rigid=plain_keys)
-        return Plan(lay.order, np.asarray(track[:, lay.order], np.float64), np.full(p, global_radius),
+        return Plan(lay.order, _tracks(xy, faces, tris[lay.order]), np.full(p, global_radius),
                     np.zeros((0, 2), np.int64), np.full(p, -1),
                     np.ones(p), lay.motions, stats, None, None)
     stats.update(transform_bytes=transform_bytes, keys_rigid=int(n_keys.sum()))
-    out_track = lay.head_local  # in place: the head-local tracks are not needed any more
-    out_track[:, wrapped] = lay.local[:, wrapped]
-    lay = lay._replace(local=None, head_local=None)
+    lay = lay._replace(head_local=None)
     radius = np.where(wrapped, r_local, r_head)
     band = np.where(wrapped, lay.band, -1)
     gain = np.where(wrapped, lay.gain, lay.head.gain)
-    keys = kh  # the wrapped paths (all among cand) take their band-local keys
-    w = np.flatnonzero(wrapped)
-    at = np.searchsorted(cand, w)
-    keys.mask[:, w], keys.values[:, w] = kl.mask[:, at], kl.values[:, at]
-    del kl
     if len(freeknots.SHAPES_DEG) > 1:
         keys = freeknots.point_keys(out_track, act, radius, freeknots.SHAPES_DEG[1:], best=keys)
     return Plan(lay.order, out_track, radius, np.array(wrapped_runs, np.int64).reshape(-1, 2), band, gain,
                 lay.motions, stats, keys, lay.head)
+
+
+def _tracks(xy: np.ndarray, faces: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Screen tracks (T, P, 6) px, float64, of the triangles tris."""
+    return np.asarray(xy[:, faces[tris]], np.float64).reshape(xy.shape[0], len(tris), 6)
+
+
+def _run_blocks(runs: list[tuple[int, int]], size: int) -> list[list[tuple[int, int]]]:
+    """Consecutive runs grouped into blocks of about size paths (a longer run is a block of its own)."""
+    blocks: list[list[tuple[int, int]]] = []
+    n = size
+    for a, b in runs:
+        if n + b - a > size:
+            blocks.append([])
+            n = 0
+        blocks[-1].append((a, b))
+        n += b - a
+    return blocks
 
 
 def compose_tracks(plan_: Plan, local: np.ndarray) -> np.ndarray:

@@ -52,6 +52,7 @@ COLOR_SLACK = 0.05  # levels kept free of evenly spaced colour keys (checked exa
 BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime): what groups weigh
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
 RAW_COUNT_PATHS = 1024  # paths per block when counting the raw encoding's bytes
+COLOR_ERROR_FRAMES = 64  # frames per block when measuring the colour error for the report
 RAW_WRITE_PATHS = 128  # paths per block when writing it (its one format call holds 18 objects per tri-frame)
 
 
@@ -206,18 +207,29 @@ def _raw_strings(tri_xy: np.ndarray) -> list[str]:
 
 def color_keys(rgb: np.ndarray, active: np.ndarray, tolerance: float) -> keyframes.Keys:
     """Colour (T, P, 3) in 0..1 as linear keys within tolerance 8-bit levels per channel where shown (values
-    rounded to integer levels, which the tolerance includes). A path whose shown colours all lie within the
-    tolerance of their mid-range is one static colour (two equal keys)."""
-    levels = np.asarray(rgb, np.float64) * 255
+    rounded to integer levels, which the tolerance includes; uint8). A path whose shown colours all lie within
+    the tolerance of their mid-range is one static colour (two equal keys). Worked out a block of paths at a
+    time (each path's keys are its own), so only the keys take memory for every path."""
     t, p = active.shape
-    lo = np.where(active[..., None], levels, np.inf).min(axis=0)
-    hi = np.where(active[..., None], levels, -np.inf).max(axis=0)
+    mask = np.zeros((t + 1, p), bool)
+    values = np.zeros((t + 1, p, 3), np.uint8)
+    for a in range(0, p, freeknots.BLOCK_TRACKS):
+        sl = slice(a, a + freeknots.BLOCK_TRACKS)
+        mask[:, sl], values[:, sl] = _color_block(np.asarray(rgb[:, sl], np.float64) * 255, active[:, sl], tolerance)
+    return keyframes.Keys(mask, values, np.where(active.any(axis=0), np.argmax(active, axis=0), -1))
+
+
+def _color_block(levels: np.ndarray, active: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """color_keys' mask (T+1, N) and values (T+1, N, 3) for colour levels (T, N, 3) in 0..255."""
+    t, p = active.shape
+    shown = active[..., None]
+    lo = levels.min(axis=0, where=shown, initial=np.inf)
+    hi = levels.max(axis=0, where=shown, initial=-np.inf)
     flat = ((hi - lo).max(axis=-1, initial=0.0) / 2 + 0.5 <= tolerance) & active.any(axis=0)
     mask = np.zeros((t + 1, p), bool)
     values = np.zeros((t + 1, p, 3))
     mask[[0, t]] = flat
     values[[0, t]] = np.where(flat[:, None], np.rint((lo + hi) / 2), 0.0)
-    first = np.where(active.any(axis=0), np.argmax(active, axis=0), -1)
     rest = np.flatnonzero(~flat)
     if len(rest):
         eps = max(tolerance - 0.5 - COLOR_TIME_LEVELS, 1e-6)  # rounding, keyTimes
@@ -237,17 +249,20 @@ def color_keys(rgb: np.ndarray, active: np.ndarray, tolerance: float) -> keyfram
             else:
                 keys = fallback(clipped)
                 mask[:, clipped], values[:, clipped] = keys.mask, np.rint(keys.values)
-        values = np.clip(values, 0, 255)
-    return keyframes.Keys(mask, values, first)
+    return mask, np.clip(values, 0, 255).astype(np.uint8)
 
 
 def color_error(rgb: np.ndarray, active: np.ndarray, static: np.ndarray, animated: np.ndarray,
                 tolerance: float) -> np.ndarray:
     """Per shown (frame, path) the largest channel error in levels of a path's static colour (P, 3) against the
-    exact shade rgb (T, P, 3) in 0..1; an animated path counts its tolerance (its bound, not evaluated)."""
-    err = np.abs(np.asarray(rgb, np.float64) * 255 - static[None]).max(axis=-1)
-    err[:, animated] = tolerance
-    return err[active]
+    exact shade rgb (T, P, 3) in 0..1; an animated path counts its tolerance (its bound, not evaluated).
+    Frame-major, like err[active]; a block of frames at a time."""
+    out = []
+    for a in range(0, active.shape[0], COLOR_ERROR_FRAMES):
+        err = np.abs(np.asarray(rgb[a:a + COLOR_ERROR_FRAMES], np.float64) * 255 - static[None]).max(axis=-1)
+        err[:, animated] = tolerance
+        out.append(err[active[a:a + COLOR_ERROR_FRAMES]])
+    return np.concatenate(out) if out else np.zeros(0)
 
 
 def _discrete(attribute: str, codes: np.ndarray, names: list[str], kt: list[str], dur: str) -> list[str]:
@@ -276,20 +291,21 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     tris, active = tris[shown], active[:, shown]
     p = len(tris)
     dur = f"{sheet.duration:.6f}".rstrip("0").rstrip(".") + "s"  # SMIL clock values need the leading digit
-    track = sheet.xy[:, sheet.faces[tris]].reshape(t, p, 6)  # float32 as stored; float64 where keyframed
-    glob = track
     extra: dict = {"encoding": {"mode": mode}}
+    if mode == "bounded":  # the raw file's d values alone, counted exactly (writing them would cost more)
+        report.sizes["raw_d_values"] = raw_values_bytes(sheet.xy, sheet.faces[tris])
     budget = ErrorBudget.split(options.tolerance, max(sheet.camera.width, sheet.camera.height))
     plan = None
     if mode == "bounded" and options.rigid and p:
         costs = groups.Costs(lambda m: len(group_open(m, t, dur)), len(CLOSE), BYTES_PER_KEY)
-        plan = groups.plan(sheet.xy, sheet.faces, sheet.part_ids, sheet.neutral, tris, active, track, budget, costs)
+        plan = groups.plan(sheet.xy, sheet.faces, sheet.part_ids, sheet.neutral, tris, active, budget, costs)
         if plan.head is not None:  # else nothing pays for a group: the plain encoding, byte for byte
             tris, active, track = tris[plan.order], active[:, plan.order], plan.track
         else:
             plan = None
-    if plan is None and mode == "bounded":  # the raw encodings convert a block of paths at a time
-        track = track.astype(np.float64)
+    if plan is None:  # float32 as stored for the raw encodings (a block of paths at a time); float64 where keyed
+        track = sheet.xy[:, sheet.faces[tris]].reshape(t, p, 6)
+        track = track.astype(np.float64) if mode == "bounded" else track
     joined = None
     if mode == "bounded" and options.max_animations is not None and p > options.max_animations:
         joined, tris, active, track, plan = _merge_plan(sheet, tris, active, track, plan, options)
@@ -297,7 +313,10 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
         body = _encode_raw(sheet, tris, active, track, dur, chapter=mode == "chapter")
         scale = 1
     else:
-        body, scale, enc = _encode_keyed(sheet, budget, tris, active, track, dur, report, plan,
+        tl = _timeline(track, active, budget, plan)
+        if plan is not None:  # its keys live on only in tl: let them go before the colours are worked out
+            plan = plan._replace(keys=None)
+        body, scale, enc = _encode_keyed(sheet, budget, tris, active, track, tl, dur, report, plan,
                                          options.color_tolerance, joined)
         extra["encoding"].update(enc)
     head = [_header(sheet, scale), metadata(sheet, options, report, extra, order=tris),
@@ -305,8 +324,6 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     report.counts["paths"] = p if joined is None else len(joined.starts) - 1
     if mode == "bounded":
         report.figures["playback_ms_4x"] = playcost.predict_ms(report.counts)
-        # The raw file's d values alone, counted exactly (writing them would cost more than this conversion).
-        report.sizes["raw_d_values"] = raw_values_bytes(glob)
     report.counts["depth_conflicts"] = dl.conflicts
     report.counts["depth_conflicts_left"] = dl.residual
     report.counts["layer_copies"] = int(len(tris) - len(np.unique(tris)))
@@ -400,14 +417,15 @@ def _merged_geometry(track: np.ndarray, active: np.ndarray, radius: np.ndarray, 
     return anims, firsts, len(rows)
 
 
-def raw_values_bytes(track: np.ndarray) -> int:
-    """Exact bytes of the raw encoding's d values for tracks (T, P, 6) px: every frame plus the held last,
-    'M x,y L x,y L x,y Z' with 2 decimals, ';' between (the bulk of a raw file; counted, not written, a block
-    of paths at a time)."""
-    t, p = track.shape[:2]
+def raw_values_bytes(xy: np.ndarray, corners: np.ndarray) -> int:
+    """Exact bytes of the raw encoding's d values for the triangles of vertex ids corners (P, 3) over xy
+    (T, V, 2) px: every frame plus the held last, 'M x,y L x,y L x,y Z' with 2 decimals, ';' between (the bulk
+    of a raw file; counted, not written, a block of paths at a time)."""
+    t, p = xy.shape[0], len(corners)
     total = 0
     for a in range(0, p, RAW_COUNT_PATHS):
-        c = np.rint(np.asarray(track[:, a:a + RAW_COUNT_PATHS], np.float64) * 100).astype(np.int64)
+        block = xy[:, corners[a:a + RAW_COUNT_PATHS]].reshape(t, -1, 6)
+        c = np.rint(np.asarray(block, np.float64) * 100).astype(np.int64)
         per_value = (_digits(np.abs(c) // 100) + 3 + (c < 0)).sum(axis=2) + 7 + 1  # numbers, M L L Z, commas, ';'
         total += int(per_value.sum() + per_value[-1].sum())
     return total - p
@@ -513,7 +531,7 @@ def _varying(pk: np.ndarray, p: int, rows: np.ndarray) -> np.ndarray:
 
 def _uniform_instead(attribute: str, track: np.ndarray, active: np.ndarray, counts: np.ndarray,
                      keyed_len: np.ndarray, value_len: np.ndarray, scale: float, radius: float | np.ndarray,
-                     pairs: bool, fmt, dur: str, anims: list[str]) -> dict[int, np.ndarray]:
+                     pairs: bool, fmt, dur: str, anims: list[str], unit: float = 1.0) -> dict[int, np.ndarray]:
     """Replace a path's keyed animation by evenly spaced keys (no keyTimes) where that is shorter.
 
     Evenly spaced values are least-squares fitted and checked exactly (rounding included) against the bound
@@ -521,7 +539,7 @@ def _uniform_instead(attribute: str, track: np.ndarray, active: np.ndarray, coun
     pass and save the keyTimes text. counts: greedy keys per path; keyed_len: its animation's length; value_len:
     the typical length of one value; fmt(values (K, D) ints, path index) -> K strings. anims is updated in place;
     returns the new values (K, D) of the paths changed (their first is the frame-0 value the static attribute
-    must hold)."""
+    must hold). unit: what track's values are multiplied by as they are fitted (float64)."""
     t, p = active.shape
     ladder = np.unique(np.round(np.geomspace(2, t + 1, 48)).astype(np.int64))
     values: dict[int, np.ndarray] = {}
@@ -533,7 +551,7 @@ def _uniform_instead(attribute: str, track: np.ndarray, active: np.ndarray, coun
         worth = head + cand * (value_len[todo] + 1) - 1 < keyed_len[todo]
         for n in np.unique(cand[worth]).tolist():
             idx = todo[worth & (cand == n)]
-            q, ok = keyframes.uniform_fit(track[:, idx], active[:, idx], n, scale,
+            q, ok = keyframes.uniform_fit(np.asarray(track[:, idx], np.float64) * unit, active[:, idx], n, scale,
                                           radius if np.isscalar(radius) else radius[idx], pairs)
             for j, col in zip(idx[ok].tolist(), np.flatnonzero(ok).tolist()):
                 values[j] = q[:, col]
@@ -577,24 +595,33 @@ def timeline_key_times(tl: collapse.Timeline, rows: np.ndarray, t: int, px: floa
     return out.tolist(), decimals
 
 
+def _radius(budget: ErrorBudget, plan: groups.Plan | None) -> tuple[float | np.ndarray, float | np.ndarray]:
+    """Euclidean px left for keyframing and the bound an exactly checked fit may use, per path under a plan
+    (local px, scaled down by the error gain of the path's group transform)."""
+    if plan is None:
+        return budget.keys, budget.fit_bound
+    return plan.radius, budget.fit_bound / plan.gain
+
+
+def _timeline(track: np.ndarray, active: np.ndarray, budget: ErrorBudget,
+              plan: groups.Plan | None) -> collapse.Timeline:
+    """The paths' keys within the budget, hidden frames collapsed (collapse.py): the plan's keys where it
+    reduced these tracks to decide its groups, else free knots now."""
+    keys = plan.keys if plan is not None else freeknots.point_keys(track, active, _radius(budget, plan)[0])
+    return collapse.fold(keys._replace(values=keys.values[..., :6]), active)
+
+
 def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: np.ndarray, track: np.ndarray,
-                  dur: str, report: Report, plan: groups.Plan | None = None,
+                  tl: collapse.Timeline, dur: str, report: Report, plan: groups.Plan | None = None,
                   color_tolerance: float = 3.0, joined: merge.Merge | None = None) -> tuple[list[str], int, dict]:
-    """The error-bounded integer encoding (module docstring) within budget; plan: rigid groups (local tracks);
-    colours within color_tolerance levels; joined: paths drawn as one element (converter.encode.merge)."""
+    """The error-bounded integer encoding (module docstring) of the keys tl within budget; plan: rigid groups
+    (local tracks); colours within color_tolerance levels; joined: paths drawn as one element
+    (converter.encode.merge)."""
     t, p = active.shape
     tol = budget.tolerance
     view_scale = budget.scale
     time_budget = budget.keytimes
-    radius = budget.keys  # Euclidean px left for keyframing
-    bound = budget.fit_bound
-    if plan is not None:  # per path: local px, scaled down by the error gain of the path's group transform
-        radius, bound = plan.radius, bound / plan.gain
-    if plan is not None:  # the plan reduced these tracks to decide its groups: the same keys
-        keys = plan.keys
-    else:
-        keys = freeknots.point_keys(track, active, radius)
-    tl = collapse.fold(keys._replace(values=keys.values[..., :6]), active)  # hidden = collapsed (collapse.py)
+    radius, bound = _radius(budget, plan)
     pk = tl.path
     rows = np.rint(tl.values * view_scale).astype(np.int64)
     gain = plan.gain[pk] if plan is not None else 1.0  # local px -> output px
@@ -623,7 +650,8 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     for j in [j for j in d_uniform if active[0, j]]:  # the static d holds frame 0 as played where it is shown
         d_first[j] = _path_strings(d_uniform[j][:1], off[j:j + 1])[0]
     # Colour: linear keys within the colour tolerance; the first key's colour is the path's class.
-    ckeys = color_keys(sheet.face_rgb[:, tris], active, color_tol)
+    rgb = sheet.face_rgb[:, tris]  # float32 as stored; each use takes float64 levels a block at a time
+    ckeys = color_keys(rgb, active, color_tol)
     if sets:  # a merged path's one static colour (its code's), and its d keyed for all its triangles together
         levels = joined.levels
         ckeys.mask[:, inside] = False
@@ -639,9 +667,9 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     c_anims, _, n_color_keys = _linear("color", cpk, p, _hex(crow).tolist(), key_times(cfk, t, c_dec), dur,
                                        c_vary)
     c_len = np.array([len(a) for a in c_anims])
-    c_uniform = _uniform_instead("color", sheet.face_rgb[:, tris].astype(np.float64) * 255, active,
-                                  ckeys.mask.sum(axis=0), c_len, np.full(p, 7.0), 1.0, color_tol - COLOR_SLACK, False,
-                                  lambda v, j: _hex(np.clip(v, 0, 255)).tolist(), dur, c_anims)
+    c_uniform = _uniform_instead("color", rgb, active, ckeys.mask.sum(axis=0), c_len, np.full(p, 7.0), 1.0,
+                                  color_tol - COLOR_SLACK, False, lambda v, j: _hex(np.clip(v, 0, 255)).tolist(),
+                                  dur, c_anims, unit=255.0)
     n_uniform = len(d_uniform) + len(c_uniform)
     cbounds = np.searchsorted(cpk, np.arange(p + 1))[:-1]
     packed = (crow[:, 0] << 16) | (crow[:, 1] << 8) | crow[:, 2]
@@ -700,7 +728,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     report.counts["palette"] = len(palette)
     report.counts["color_animations"] = int(sum(1 for a in c_anims if a))
     report.counts["animated_paths"] = int(sum(1 for a in d_anims if a))
-    err = color_error(sheet.face_rgb[:, tris], active, palette[cls], c_vary, color_tol)
+    err = color_error(rgb, active, palette[cls], c_vary, color_tol)
     report.figures["color_error_max_levels"] = float(err.max(initial=0.0))
     report.figures["color_error_p99_levels"] = float(np.percentile(err, 99)) if err.size else 0.0
     report.figures["keys_per_path"] = n_keys / max(p, 1)

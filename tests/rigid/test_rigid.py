@@ -118,7 +118,7 @@ def _plan(sheet, tol, **kw):
     rg = tol - math.sqrt(0.5) / scale - tb - fe
     budget = ErrorBudget(tol, scale, math.sqrt(0.5) / scale, tb, fe, rg)
     costs = groups.Costs(lambda m: len(group_open(m, t, "2.4s")), len(CLOSE), 24)
-    plan = groups.plan(sheet.xy, sheet.faces, sheet.part_ids, 0, tris, act, track, budget, costs, **kw)
+    plan = groups.plan(sheet.xy, sheet.faces, sheet.part_ids, 0, tris, act, budget, costs, **kw)
     return plan, act, track, scale, rg
 
 
