@@ -198,3 +198,22 @@ def test_overlap_pairs_match_every_pair_tested_by_brute_force(monkeypatch, bitma
             if (near & ~overlap.apart(xy[:, i], xy[:, j], 0.5)).any():
                 want.add((i, j))
     assert len(want) > 20 and got == want
+
+
+def test_plan_in_blocks_of_runs_is_the_plan_in_one(sheet, monkeypatch):
+    """The plan works band-local tracks and keys out a block of runs at a time (memory): blocks of a few paths
+    decide the same groups, tracks and keys as one block of every path."""
+    whole, *_ = _plan(sheet, 0.25)
+    monkeypatch.setattr(freeknots, "BLOCK_TRACKS", 5)
+    small, *_ = _plan(sheet, 0.25)
+    assert whole.stats["groups"] >= 2 and len(groups._run_blocks([(a, b) for a, b in whole.groups.tolist()], 5)) > 1
+    assert np.array_equal(whole.groups, small.groups) and whole.stats == small.stats
+    assert np.array_equal(whole.track, small.track) and np.array_equal(whole.radius, small.radius)
+    assert np.array_equal(whole.keys.mask, small.keys.mask) and np.array_equal(whole.keys.values, small.keys.values)
+
+
+def test_run_blocks_keep_order_and_size():
+    runs = [(0, 3), (3, 4), (4, 10), (10, 12), (12, 13)]
+    blocks = groups._run_blocks(runs, 4)
+    assert [r for b in blocks for r in b] == runs
+    assert blocks == [[(0, 3), (3, 4)], [(4, 10)], [(10, 12), (12, 13)]]

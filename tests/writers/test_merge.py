@@ -48,6 +48,25 @@ def test_merged_file_keeps_the_bound_and_every_triangle(sample, colours):
         assert report.figures["playback_ms_4x"] < plain_report.figures["playback_ms_4x"]
 
 
+def test_merged_sets_keyed_in_size_bands_match_one_padded_width():
+    """Sets are keyed in bands of sizes, each padded to its largest (not every set to the largest of all): the
+    same texts and key count as one band padded to the widest set."""
+    rng = np.random.default_rng(5)
+    t, p = 40, 23
+    base = rng.uniform(20, 200, (1, p, 6))
+    track = base + np.cumsum(rng.normal(0, 0.6, (t, p, 6)), axis=0)
+    active = rng.random((t, p)) > 0.1
+    active[0] = True
+    sets = [(0, 2), (2, 3), (3, 14), (14, 17), (17, 19), (19, 23)]
+    sets = [s for s in sets if s[1] - s[0] > 1]
+    budget = svg_anim.ErrorBudget.split(0.25, 256)
+    args = (track, active, np.full(p, budget.keys), np.ones(p))
+    banded = svg_anim._merged_geometry(*args, sets, budget, "1.6s")
+    single = svg_anim._merged_band(*args, sets, budget, "1.6s")
+    assert len(set(np.ceil(np.log2([b - a for a, b in sets])).tolist())) >= 3
+    assert banded == single and all(banded[0]) and banded[2] > len(sets) * 2
+
+
 def test_without_a_budget_the_file_is_unchanged(sample):
     _, sheet = sample
     a, _ = _write(sheet, color_tolerance=255.0)

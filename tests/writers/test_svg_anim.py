@@ -112,6 +112,23 @@ def test_colour_keys_stay_within_colour_tolerance():
     assert np.all(keys.values == np.rint(keys.values))
 
 
+def test_colour_keys_in_blocks_are_the_keys_in_one(monkeypatch):
+    """color_keys works a block of paths at a time (memory): blocks of 4 paths give the keys of one block."""
+    rng = np.random.default_rng(1)
+    t = np.arange(50)[:, None, None]
+    rgb = np.clip(0.5 + 0.4 * np.sin(t / rng.uniform(2, 30, (1, 23, 3))), 0, 1).astype(np.float32)
+    rgb[:, :5] = rgb[:1, :5]  # static colours among the animated ones
+    active = rng.random((50, 23)) > 0.2
+    whole = svg_anim.color_keys(rgb, active, 3.0)
+    monkeypatch.setattr(svg_anim.freeknots, "BLOCK_TRACKS", 4)
+    blocks = svg_anim.color_keys(rgb, active, 3.0)
+    assert whole.values.dtype == np.uint8 and whole.mask[:, 5:].sum() > 2 * 18  # keyed, not all static
+    assert np.array_equal(whole.mask, blocks.mask) and np.array_equal(whole.values, blocks.values)
+    assert np.abs(interpolate(blocks) - rgb * 255.0)[active].max() <= 3.0 + 1e-6
+    err = svg_anim.color_error(rgb, active, whole.values[0].astype(np.float64), np.zeros(23, bool), 3.0)
+    assert np.array_equal(err, np.abs(rgb.astype(np.float64) * 255 - whole.values[0]).max(axis=-1)[active])
+
+
 def test_colour_keys_extrapolated_past_black_stay_within_tolerance():
     """A shade that rises fast after a hidden start: the free key at 0 would lie below 0 and clipping it moved the
     first shown frames by 12 levels (the capture-like face at 256 px)."""
