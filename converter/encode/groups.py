@@ -487,7 +487,7 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
         won = np.zeros(len(cand), bool)
         at = 0
         for a, b in block:
-            if pays(a, (kh_n[a:b] - kl_n[a:b]).sum() * costs.key):
+            if pays(a, ((kh_n[a:b] - kl_n[a:b]) * costs.key).sum()):
                 wrapped_runs.append((a, b))
                 won[at:at + b - a] = True
             at += b - a
