@@ -33,9 +33,9 @@ class Preset(NamedTuple):
 
 # Tuned by bench_playback (the capture-like face in Chromium under 4x CPU throttling, issue 18).
 PRESETS = {
-    "mobile": Preset("Mobile", {"size": 256, "max_triangles": 1000, "tolerance": 0.5, "color_tolerance": 255.0,
+    "mobile": Preset("Mobile", {"size": 256, "max_triangles": 850, "tolerance": 0.5, "color_tolerance": 255.0,
                                 "max_animations": 300},
-                     "256 px, at most 1000 triangles, 0.5 px tolerance, static colours, at most 300 animated paths: "
+                     "256 px, at most 850 triangles, 0.5 px tolerance, static colours, at most 300 animated paths: "
                      "a light file that plays smoothly on phones"),
 }
 
