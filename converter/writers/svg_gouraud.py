@@ -4,6 +4,9 @@ Colour space: the Sheet's vertex colours are display (sRGB-encoded) values. The 
 unchanged (FLAT shader, no sRGB framebuffer) and interpolates them linearly, and SVG gradients interpolate in
 sRGB by default (color-interpolation="sRGB"), so both interpolate the same numbers. Filters default to
 linearRGB, so the chapter method's filters say color-interpolation-filters="sRGB" or their sum would be wrong.
+
+A gradient's axis animations sit beside it (``<animate href="#g7">``), never inside: CairoSVG reads every child
+of a gradient as a stop (black, offset 0), which drew black seams along many edges of frame 0.
 """
 
 from __future__ import annotations
@@ -144,16 +147,18 @@ class _Emit:
             self.key_times[group] = _key_times(kt, self.t, floor=False)
         return True
 
-    def attrs(self, *names: str) -> tuple[str, str]:
-        """(attributes text, animate children) of the named tracks for the selected triangle."""
+    def attrs(self, *names: str, target: str = "") -> tuple[str, str]:
+        """(attributes text, animate children) of the named tracks for the selected triangle; with target, the
+        animations name their element by href instead (to be written beside it, not inside)."""
         a, kids = [], []
+        href = f'href="#{target}" ' if target else ""
         for n in names:
             tr = self.tracks[n]
             texts = tr.texts(self.rows[tr.color], "Z" if n == "d" and self.closed else "")
             a.append(f'{tr.name}="{texts[0]}"')
             if self.keys is not None and any(x != texts[0] for x in texts):
                 kids.append(
-                    f'<animate attributeName="{tr.name}" dur="{self.dur}" repeatCount="indefinite" '
+                    f'<animate {href}attributeName="{tr.name}" dur="{self.dur}" repeatCount="indefinite" '
                     f'keyTimes="{self.key_times[tr.color]}" values="{";".join(texts)}"/>'
                 )
         return " ".join(a), "".join(kids)
@@ -283,12 +288,12 @@ def _element(tag: str, attrs: str, body: str) -> str:
 
 def _exact_triangle(e: _Emit, f: int, vis: tuple[str, str], stroked: bool) -> str:
     """A userSpaceOnUse linearGradient along the colour gradient and the triangle filled and stroked with it."""
-    axis, axis_anim = e.attrs("x1", "y1", "x2", "y2")
+    axis, axis_anim = e.attrs("x1", "y1", "x2", "y2", target=f"g{f}")
     c1, c1_anim = e.attrs("c1")
     c2, c2_anim = e.attrs("c2")
     d, d_anim = e.attrs("d")
     stops = _element("stop", c1, c1_anim) + _element("stop", 'offset="1" ' + c2, c2_anim)
-    grad = f'<linearGradient id="g{f}" gradientUnits="userSpaceOnUse" {axis}>{axis_anim}{stops}</linearGradient>'
+    grad = f'<linearGradient id="g{f}" gradientUnits="userSpaceOnUse" {axis}>{stops}</linearGradient>{axis_anim}'
     stroke = f' stroke="url(#g{f})"' if stroked else ""
     path = _element("path", f'{d} fill="url(#g{f})"{stroke}{vis[0]}', d_anim + vis[1])
     return grad + path
@@ -300,11 +305,11 @@ def _chapter_triangle(e: _Emit, f: int, vis: tuple[str, str], stroked: bool) -> 
     bg, bg_anim = e.attrs("bg")
     out = [_element("path", f"{d} {bg}{vis[0]}", d_anim + bg_anim + vis[1])]
     for i, gid in enumerate("abc"):
-        axis, axis_anim = e.attrs(f"x1{i}", f"y1{i}", f"x2{i}", f"y2{i}")
+        axis, axis_anim = e.attrs(f"x1{i}", f"y1{i}", f"x2{i}", f"y2{i}", target=f"{gid}{f}")
         c, c_anim = e.attrs(f"c{i}")
         stops = _element("stop", c, c_anim) + _element("stop", 'offset="1" stop-opacity="0" ' + c, c_anim)
         out.append(
-            f'<linearGradient id="{gid}{f}" gradientUnits="userSpaceOnUse" {axis}>{axis_anim}{stops}</linearGradient>'
+            f'<linearGradient id="{gid}{f}" gradientUnits="userSpaceOnUse" {axis}>{stops}</linearGradient>{axis_anim}'
         )
     copies = _element("path", f'id="p{f}" {d} fill="url(#a{f})"', d_anim) + _element(
         "path", f'id="q{f}" {d} fill="url(#b{f})"', d_anim

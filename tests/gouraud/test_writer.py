@@ -46,7 +46,8 @@ def animated_value(anim: etree._Element, k: int, n_frames: int) -> list[float]:
 def attr_numbers(el: etree._Element, name: str, k: int | None, n_frames: int) -> np.ndarray:
     """An attribute's numbers (colours as 0..255 triples), from its <animate> at frame k when there is one."""
     if k is not None:
-        for a in el.findall(f"{SVG}animate"):
+        beside = [a for a in el.getparent().findall(f"{SVG}animate") if a.get("href") == f"#{el.get('id')}"]
+        for a in el.findall(f"{SVG}animate") + beside:
             if a.get("attributeName") == name:
                 return np.array(animated_value(a, k, n_frames))
     v = el.get(name)
@@ -133,6 +134,20 @@ def test_animated_values_at_a_frame_equal_that_frames_still(sheet, raw, tol):
             assert np.abs(anim[f]["colors"] - s["colors"]).max() <= (1 if raw else 2.5)
     if not raw:
         assert report.counts["gouraud_keys"] < 2 * (t + 1) * len(sheet.order)  # geometry and colour keys
+
+
+@pytest.mark.parametrize("shading", ["gouraud", "gouraud-chapter"])
+def test_gradients_hold_only_stops_and_their_axis_animations_sit_beside_them(sheet, shading):
+    """CairoSVG reads every child of a gradient as a stop (black at offset 0): the axis animates from outside."""
+    root, _, _ = write(sheet, shading=shading, raw=True)
+    grads = list(root.iter(f"{SVG}linearGradient"))
+    assert grads and all(c.tag == f"{SVG}stop" for g in grads for c in g)
+    ids = {g.get("id") for g in grads}
+    targeted = [a for a in root.iter(f"{SVG}animate") if a.get("href")]
+    assert {a.get("attributeName") for a in targeted} == {"x1", "y1", "x2", "y2"}
+    assert {a.get("href")[1:] for a in targeted} == ids  # every gradient's axis moves (raw: every frame)
+    for a in targeted:
+        assert a.getprevious() is not None and a.getparent().tag != f"{SVG}linearGradient"
 
 
 def test_animated_visibility_follows_the_sheet(sheet):

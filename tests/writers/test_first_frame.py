@@ -102,9 +102,9 @@ def chromium_t0(browser, outputs) -> dict[str, np.ndarray]:
     return {k: chromium_frame(browser, svg, 0.0, *_size(svg), scale=ZOOM) for k, svg in outputs.items()}
 
 
-# A measured miss, kept visible (strict: it fails the suite once it passes): CairoSVG strokes the Gouraud
-# file's seam strokes in black along many edges (SSIM 0.950; see .artifacts/first_frame_gouraud_cairosvg.png).
-KNOWN_MISSES = {("gouraud", "cairosvg"): 0.9502}
+# Measured misses, kept visible (strict: each fails the suite once it passes). CairoSVG's black seams on the
+# Gouraud file (SSIM 0.950: it read the gradients' axis animations as stops) are gone: none is left.
+KNOWN_MISSES: dict[tuple[str, str], float] = {}
 
 
 @pytest.mark.parametrize("renderer", RENDERERS)
