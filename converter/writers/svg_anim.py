@@ -13,9 +13,10 @@ Three encodings of the same document structure:
   where that is shorter); integer coordinates in a viewBox scaled so rounding is part of the same budget;
   relative path syntax; static triangles without <animate>; fill and stroke are currentColor, a shared CSS
   class per colour; a triangle whose shade stays within options.color_tolerance levels of one colour is that
-  static colour, others keyed linearly within it (the default, 3 levels, is the exact shading; 255, the mobile
-  preset's, keeps every colour static: a colour animation restyles its path at every frame and costs players
-  far more than a d animation, bench_playback); hidden frames folded into the d animation
+  static colour, others a discrete animation of held colours within it (``color_steps``; the default, 3
+  levels, is the exact shading; 255, the mobile preset's, keeps every colour static: a colour animation costs
+  players far more than a d animation, and an interpolated one about three times a discrete one,
+  bench_playback); hidden frames folded into the d animation
   (converter.encode.collapse: the triangle collapses to a point within the half frame before it hides), so a
   path has at most a d and a color <animate>; never-visible triangles dropped.
 
@@ -48,11 +49,10 @@ from converter.writers.svgtext import number as svg_number
 FORMAT_VERSION = 2
 STROKE_PX = 0.5  # stroke of the fill colour hides anti-aliasing seams between neighbours
 COLOR_TIME_LEVELS = 0.1  # of which rounding the colour keyTimes may take
-COLOR_SLACK = 0.05  # levels kept free of evenly spaced colour keys (checked exactly, rounding included)
 BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime): what groups weigh
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
 RAW_COUNT_PATHS = 1024  # paths per block when counting the raw encoding's bytes
-COLOR_ERROR_FRAMES = 64  # frames per block when measuring the colour error for the report
+COLOR_ERROR_CELLS = 1 << 18  # frames x paths per block when measuring the colour error for the report
 RAW_WRITE_PATHS = 128  # paths per block when writing it (its one format call holds 18 objects per tri-frame)
 
 
@@ -71,22 +71,6 @@ def key_time_decimals(n_frames: int, slope: np.ndarray, budget: float) -> np.nda
     d = np.ceil(np.log10(np.maximum(need, 1.0)))
     low = math.ceil(math.log10(max(n_frames, 2)))
     return np.clip(d, low, 12).astype(np.int64)
-
-
-def key_slopes(mask: np.ndarray, rows: np.ndarray, pairs: bool) -> np.ndarray:
-    """Per key (path-major, as np.nonzero(mask.T)) the fastest change per frame of the segments it bounds;
-    rows (K, D) are the key values: Euclidean per 2D point when pairs, else per coordinate."""
-    pk, fk = np.nonzero(mask.T)
-    out = np.zeros(len(pk))
-    if len(pk) < 2:
-        return out
-    same = pk[1:] == pk[:-1]
-    dv = np.diff(np.asarray(rows, np.float64), axis=0)
-    step = np.linalg.norm(dv.reshape(len(dv), -1, 2), axis=-1) if pairs else np.abs(dv)
-    seg = np.where(same, step.max(axis=1) / np.maximum(np.diff(fk), 1), 0.0)  # segment i: key i -> key i + 1
-    out[:-1] = seg
-    out[1:] = np.maximum(out[1:], seg)
-    return out
 
 
 def metadata(sheet: Sheet, options: ConversionOptions, report: Report, extra: dict | None = None,
@@ -252,16 +236,58 @@ def _color_block(levels: np.ndarray, active: np.ndarray, tolerance: float) -> tu
     return mask, np.clip(values, 0, 255).astype(np.uint8)
 
 
-def color_error(rgb: np.ndarray, active: np.ndarray, static: np.ndarray, animated: np.ndarray,
-                tolerance: float) -> np.ndarray:
-    """Per shown (frame, path) the largest channel error in levels of a path's static colour (P, 3) against the
-    exact shade rgb (T, P, 3) in 0..1; an animated path counts its tolerance (its bound, not evaluated).
-    Frame-major, like err[active]; a block of frames at a time."""
+def color_steps(rgb: np.ndarray, active: np.ndarray, tolerance: float) -> keyframes.Keys:
+    """Colour (T, P, 3) in 0..1 as steps for a discrete animation: per path the fewest held colours (integer
+    levels, uint8) within tolerance levels per channel of every shown frame, each held from its first frame (a
+    key; frame 0 always is one, hidden frames take whatever is held). Greedy, which is optimal for a max-norm
+    bound on a piecewise-constant fit. A path with one key is one static colour.
+
+    Why steps and not linear keys: Chromium re-evaluates an interpolated colour animation far more slowly than a
+    discrete one (bench_playback: the sample's exact-colour file played 3x faster with the same values held), and
+    the steps need about as many keys as the linear greedy within the same tolerance."""
+    t, p = active.shape
+    mask = np.zeros((t + 1, p), bool)
+    values = np.zeros((t + 1, p, 3), np.uint8)
+    if not t or not p:
+        return keyframes.Keys(mask, values, np.full(p, -1))
+    lo = np.full((p, 3), np.inf)
+    hi = np.full((p, 3), -np.inf)
+    start = np.zeros(p, np.int64)
+    cols = np.arange(p)
+
+    def hold(sel: np.ndarray) -> None:
+        mid = np.where(np.isfinite(lo[sel]), (lo[sel] + hi[sel]) / 2, 0.0)
+        mask[start[sel], cols[sel]] = True
+        values[start[sel], cols[sel]] = np.clip(np.rint(mid), 0, 255).astype(np.uint8)
+
+    for f in range(t):
+        a = active[f]
+        x = np.asarray(rgb[f], np.float64) * 255
+        nlo, nhi = np.minimum(lo, x), np.maximum(hi, x)
+        cut = a & ((nhi - nlo).max(axis=1) / 2 + 0.5 > tolerance)  # frame f does not fit the held colour
+        if cut.any():
+            hold(np.flatnonzero(cut))
+            start[cut] = f
+        a3 = a[:, None]
+        lo = np.where(cut[:, None], x, np.where(a3, nlo, lo))
+        hi = np.where(cut[:, None], x, np.where(a3, nhi, hi))
+    hold(cols)
+    return keyframes.Keys(mask, values, np.where(active.any(axis=0), np.argmax(active, axis=0), -1))
+
+
+def color_error(rgb: np.ndarray, active: np.ndarray, steps: keyframes.Keys) -> np.ndarray:
+    """Per shown (frame, path) the largest channel error in levels of the played colour (color_steps' held
+    values) against the exact shade rgb (T, P, 3) in 0..1, path-block-major; a block of paths at a time."""
+    t, p = active.shape
     out = []
-    for a in range(0, active.shape[0], COLOR_ERROR_FRAMES):
-        err = np.abs(np.asarray(rgb[a:a + COLOR_ERROR_FRAMES], np.float64) * 255 - static[None]).max(axis=-1)
-        err[:, animated] = tolerance
-        out.append(err[active[a:a + COLOR_ERROR_FRAMES]])
+    block = max(1, COLOR_ERROR_CELLS // max(t, 1))
+    frame = np.arange(t)[:, None]
+    for a in range(0, p, block):
+        sl = slice(a, a + block)
+        held = np.maximum.accumulate(np.where(steps.mask[:t, sl], frame, 0), axis=0)
+        played = np.take_along_axis(steps.values[:t, sl], held[..., None], axis=0).astype(np.float64)
+        err = np.abs(np.asarray(rgb[:, sl], np.float64) * 255 - played).max(axis=-1)
+        out.append(err[active[:, sl]])
     return np.concatenate(out) if out else np.zeros(0)
 
 
@@ -512,9 +538,10 @@ def _raw_block(rgb: np.ndarray, active: np.ndarray, track: np.ndarray, ids: list
 
 
 def _linear(attribute: str, pk: np.ndarray, p: int, text: list[str], kt_text: list[str], dur: str,
-            animate: np.ndarray) -> tuple[list[str], list[str], int]:
-    """Per path a linear <animate> through its keys (pk: the path of each key, sorted; value and keyTimes texts
-    path-major) where animate[j]."""
+            animate: np.ndarray, discrete: bool = False) -> tuple[list[str], list[str], int]:
+    """Per path a linear (or discrete: each value held until the next key) <animate> through its keys (pk: the
+    path of each key, sorted; value and keyTimes texts path-major) where animate[j]."""
+    mode = 'calcMode="discrete" ' if discrete else ""
     bounds = np.searchsorted(pk, np.arange(p + 1)).tolist()
     out, first, n = [""] * p, [""] * p, 0
     for j in range(p):
@@ -525,7 +552,7 @@ def _linear(attribute: str, pk: np.ndarray, p: int, text: list[str], kt_text: li
         if not animate[j]:
             n += 1
             continue
-        out[j] = (f'<animate attributeName="{attribute}" dur="{dur}" repeatCount="indefinite" '
+        out[j] = (f'<animate attributeName="{attribute}" {mode}dur="{dur}" repeatCount="indefinite" '
                   f'keyTimes="{";".join(kt_text[a:b])}" values="{";".join(text[a:b])}"/>')
         n += b - a
     return out, first, n
@@ -547,7 +574,7 @@ def _varying(pk: np.ndarray, p: int, rows: np.ndarray) -> np.ndarray:
 
 def _uniform_instead(attribute: str, track: np.ndarray, active: np.ndarray, counts: np.ndarray,
                      keyed_len: np.ndarray, value_len: np.ndarray, scale: float, radius: float | np.ndarray,
-                     pairs: bool, fmt, dur: str, anims: list[str], unit: float = 1.0) -> dict[int, np.ndarray]:
+                     pairs: bool, fmt, dur: str, anims: list[str]) -> dict[int, np.ndarray]:
     """Replace a path's keyed animation by evenly spaced keys (no keyTimes) where that is shorter.
 
     Evenly spaced values are least-squares fitted and checked exactly (rounding included) against the bound
@@ -555,7 +582,7 @@ def _uniform_instead(attribute: str, track: np.ndarray, active: np.ndarray, coun
     pass and save the keyTimes text. counts: greedy keys per path; keyed_len: its animation's length; value_len:
     the typical length of one value; fmt(values (K, D) ints, path index) -> K strings. anims is updated in place;
     returns the new values (K, D) of the paths changed (their first is the frame-0 value the static attribute
-    must hold). unit: what track's values are multiplied by as they are fitted (float64)."""
+    must hold)."""
     t, p = active.shape
     ladder = np.unique(np.round(np.geomspace(2, t + 1, 48)).astype(np.int64))
     values: dict[int, np.ndarray] = {}
@@ -567,7 +594,7 @@ def _uniform_instead(attribute: str, track: np.ndarray, active: np.ndarray, coun
         worth = head + cand * (value_len[todo] + 1) - 1 < keyed_len[todo]
         for n in np.unique(cand[worth]).tolist():
             idx = todo[worth & (cand == n)]
-            q, ok = keyframes.uniform_fit(np.asarray(track[:, idx], np.float64) * unit, active[:, idx], n, scale,
+            q, ok = keyframes.uniform_fit(np.asarray(track[:, idx], np.float64), active[:, idx], n, scale,
                                           radius if np.isscalar(radius) else radius[idx], pairs)
             for j, col in zip(idx[ok].tolist(), np.flatnonzero(ok).tolist()):
                 values[j] = q[:, col]
@@ -665,34 +692,28 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
                                  dur, d_anims)
     for j in [j for j in d_uniform if active[0, j]]:  # the static d holds frame 0 as played where it is shown
         d_first[j] = _path_strings(d_uniform[j][:1], off[j:j + 1])[0]
-    # Colour: linear keys within the colour tolerance; the first key's colour is the path's class.
+    # Colour: held steps within the colour tolerance (color_steps); the first step's colour is the path's class.
     rgb = sheet.face_rgb[:, tris]  # float32 as stored; each use takes float64 levels a block at a time
-    ckeys = color_keys(rgb, active, color_tol)
+    ckeys = color_steps(rgb, active, color_tol)
     if sets:  # a merged path's one static colour (its code's), and its d keyed for all its triangles together
         levels = joined.levels
         ckeys.mask[:, inside] = False
-        ckeys.mask[0, inside] = ckeys.mask[t, inside] = True
-        ckeys.values[0, inside] = ckeys.values[t, inside] = levels[inside]
+        ckeys.mask[0, inside] = True
+        ckeys.values[0, inside] = levels[inside]
         m_radius = np.broadcast_to(np.asarray(radius, np.float64), (p,))
         m_gain = plan.gain if plan is not None else np.ones(p)
         m_anims, m_first, m_keys = _merged_geometry(track, active, m_radius, m_gain, sets, budget, dur)
     cpk, cfk = np.nonzero(ckeys.mask.T)
     crow = ckeys.values.transpose(1, 0, 2)[cpk, cfk].astype(np.int64)
     c_vary = _varying(cpk, p, crow)
-    c_dec = key_time_decimals(t, key_slopes(ckeys.mask, crow, False), COLOR_TIME_LEVELS)
-    c_anims, _, n_color_keys = _linear("color", cpk, p, _hex(crow).tolist(), key_times(cfk, t, c_dec), dur,
-                                       c_vary)
-    c_len = np.array([len(a) for a in c_anims])
-    c_uniform = _uniform_instead("color", rgb, active, ckeys.mask.sum(axis=0), c_len, np.full(p, 7.0), 1.0,
-                                  color_tol - COLOR_SLACK, False, lambda v, j: _hex(np.clip(v, 0, 255)).tolist(),
-                                  dur, c_anims, unit=255.0)
-    n_uniform = len(d_uniform) + len(c_uniform)
+    # A step shows from frame k: placed half a frame early, rounded by at most a quarter frame.
+    c_dec = math.ceil(math.log10(2 * max(t, 1)))
+    c_anims, _, n_color_keys = _linear("color", cpk, p, _hex(crow).tolist(), key_times(cfk, t, c_dec, "early"),
+                                       dur, c_vary, discrete=True)
+    n_uniform = len(d_uniform)
     cbounds = np.searchsorted(cpk, np.arange(p + 1))[:-1]
     packed = (crow[:, 0] << 16) | (crow[:, 1] << 8) | crow[:, 2]
     base = packed[np.minimum(cbounds, max(len(packed) - 1, 0))] if len(packed) else np.zeros(p, np.int64)
-    for j in [j for j in c_uniform if active[0, j]]:  # the class colour is frame 0's as played where shown
-        c0 = np.clip(c_uniform[j][0], 0, 255).astype(np.int64)
-        base[j] = (c0[0] << 16) | (c0[1] << 8) | c0[2]
     values, counts = np.unique(base, return_counts=True)
     rank = np.lexsort((values, -counts))  # the most used colour gets the shortest class name
     remap = np.empty(len(values), np.int64)
@@ -744,7 +765,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     report.counts["palette"] = len(palette)
     report.counts["color_animations"] = int(sum(1 for a in c_anims if a))
     report.counts["animated_paths"] = int(sum(1 for a in d_anims if a))
-    err = color_error(rgb, active, palette[cls], c_vary, color_tol)
+    err = color_error(rgb, active, ckeys)
     report.figures["color_error_max_levels"] = float(err.max(initial=0.0))
     report.figures["color_error_p99_levels"] = float(np.percentile(err, 99)) if err.size else 0.0
     report.figures["keys_per_path"] = n_keys / max(p, 1)

@@ -1,5 +1,6 @@
 """The animated SVG writer: raw, the chapter's post-optimisations, and the error-bounded default encoding."""
 
+import dataclasses
 import gzip
 import re
 
@@ -125,8 +126,88 @@ def test_colour_keys_in_blocks_are_the_keys_in_one(monkeypatch):
     assert whole.values.dtype == np.uint8 and whole.mask[:, 5:].sum() > 2 * 18  # keyed, not all static
     assert np.array_equal(whole.mask, blocks.mask) and np.array_equal(whole.values, blocks.values)
     assert np.abs(interpolate(blocks) - rgb * 255.0)[active].max() <= 3.0 + 1e-6
-    err = svg_anim.color_error(rgb, active, whole.values[0].astype(np.float64), np.zeros(23, bool), 3.0)
-    assert np.array_equal(err, np.abs(rgb.astype(np.float64) * 255 - whole.values[0]).max(axis=-1)[active])
+
+
+def _held(steps, t: int) -> np.ndarray:
+    """The colour each path shows at frames 0..t-1: its last step's value (a brute-force reading)."""
+    out = np.zeros((t,) + steps.values.shape[1:])
+    for j in range(steps.mask.shape[1]):
+        for k in range(t):
+            out[k, j] = steps.values[np.flatnonzero(steps.mask[:k + 1, j])[-1], j]
+    return out
+
+
+def _fewest_steps(levels: np.ndarray, shown: np.ndarray, tol: float) -> int:
+    """Fewest held colours within tol of one track's shown levels (T, 3): dynamic programming over cut points."""
+    t = len(levels)
+    best = [0] + [10**9] * t
+    for b in range(1, t + 1):
+        for a in range(b):
+            sel = levels[a:b][shown[a:b]]
+            if not len(sel) or (sel.max(axis=0) - sel.min(axis=0)).max() / 2 + 0.5 <= tol:
+                best[b] = min(best[b], best[a] + 1)
+    return best[t]
+
+
+def test_colour_steps_hold_within_tolerance_with_the_fewest_steps():
+    """color_steps: every shown frame within the tolerance of the held colour (integer levels), frame 0 always a
+    step, a still shade one step, and no track split into more steps than the optimum (brute force)."""
+    rng = np.random.default_rng(2)
+    t = np.arange(40)[:, None, None]
+    rgb = np.clip(0.5 + 0.3 * np.sin(t / rng.uniform(2, 15, (1, 12, 3))), 0, 1).astype(np.float32)
+    rgb[:, :2] = rgb[5:6, :2]  # still shades
+    active = rng.random((40, 12)) > 0.25
+    active[:, 11] = np.arange(40) >= 30  # hidden until frame 30: its step at 0 holds the later colour
+    steps = svg_anim.color_steps(rgb, active, 3.0)
+    assert steps.values.dtype == np.uint8 and steps.mask[0].all() and not steps.mask[40].any()
+    held = _held(steps, 40)
+    err = np.abs(held - rgb.astype(np.float64) * 255).max(axis=-1)
+    assert err[active].max() <= 3.0
+    assert (steps.mask.sum(axis=0)[:2] == 1).all() and steps.mask.sum() > 12 * 3
+    assert steps.mask[:, 11].sum() == 1 + (steps.mask[31:40, 11].sum())  # no step while it is hidden
+    for j in range(12):
+        assert steps.mask[:, j].sum() == _fewest_steps(rgb[:, j].astype(np.float64) * 255, active[:, j], 3.0)
+    # The report's colour error is the played one, exactly, whatever the block of paths.
+    report_err = svg_anim.color_error(rgb, active, steps)
+    assert np.array_equal(np.sort(report_err), np.sort(err.T[active.T]))
+
+
+def test_colour_error_in_blocks_is_the_error_in_one(monkeypatch):
+    rng = np.random.default_rng(3)
+    rgb = rng.random((30, 9, 3)).astype(np.float32)
+    active = rng.random((30, 9)) > 0.3
+    steps = svg_anim.color_steps(rgb, active, 3.0)
+    whole = svg_anim.color_error(rgb, active, steps)
+    monkeypatch.setattr(svg_anim, "COLOR_ERROR_CELLS", 60)  # two paths a block
+    blocks = svg_anim.color_error(rgb, active, steps)  # same errors; their order follows the blocks
+    assert np.array_equal(np.sort(blocks), np.sort(whole)) and len(whole) == active.sum() and whole.max() <= 3.0
+
+
+def test_svg_colours_are_discrete_steps_that_play_within_the_tolerance():
+    """In the file: exact-colour paths animate colour with calcMode discrete; read back as a player does
+    (each frame at k / T takes the last keyTime at or before it), every shown frame is within 3 levels."""
+    anim = half_moving(30)
+    rng = np.random.default_rng(4)
+    sheet = sheet_of(anim)
+    sheet = dataclasses.replace(sheet, face_rgb=np.clip(sheet.face_rgb + 0.05 * np.sin(
+        np.arange(30)[:, None, None] / rng.uniform(1, 6, (1, sheet.face_rgb.shape[1], 3))), 0, 1).astype(np.float32))
+    data = svg_anim.write(sheet, ConversionOptions(), Report())
+    t = sheet.n_frames
+    animated = 0
+    for p in paths(data):
+        tri = int(p.get("id")[1:])
+        anims = p.findall(f"{SVG}animate[@attributeName='color']")
+        shown = sheet.visible[:, tri]
+        exact = sheet.face_rgb[:, tri].astype(np.float64) * 255
+        if not anims:
+            continue
+        animated += 1
+        assert anims[0].get("calcMode") == "discrete"
+        times = np.array([float(x) for x in anims[0].get("keyTimes").split(";")])
+        cols = np.array([[int(v[i:i + 2], 16) for i in (1, 3, 5)] for v in anims[0].get("values").split(";")])
+        idx = np.searchsorted(times, np.arange(t) / t, side="right") - 1
+        assert times[0] == 0 and np.abs(cols[idx] - exact)[shown].max() <= 3.0
+    assert animated > 5
 
 
 def test_colour_keys_extrapolated_past_black_stay_within_tolerance():
