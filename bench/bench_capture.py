@@ -262,14 +262,23 @@ def _levers(sheet, anim, data: bytes, raw_n: int) -> list[str]:
     return out
 
 
+def _sampled_block(x, active, eps, limit, scale=None):
+    """freeknots._reduce_block's contract with keys on sampled values (keyframes.reduce); never gives up."""
+    xs = np.asarray(x if scale is None else x * scale, np.float64)
+    k = keyframes.reduce(xs, active, eps)
+    values = k.values if scale is None else k.values / scale
+    return keyframes.Keys(k.mask, values, np.zeros(0, np.int64)), np.zeros(x.shape[1], bool)
+
+
 def _without_free_knots(sheet) -> bytes:
-    """The default output at 0.5 px with every path and colour key on a sampled value (keyframes.reduce)."""
-    real = freeknots.reduce_free
-    freeknots.reduce_free = keyframes.reduce
+    """The default output at 0.5 px with every path key on a sampled value (keyframes.reduce): the
+    free-knot kernel (freeknots._reduce_block, which point_keys and reduce_free call) swapped out."""
+    real = freeknots._reduce_block
+    freeknots._reduce_block = _sampled_block
     try:
         return _write(sheet, ConversionOptions(tolerance=0.5))[0]
     finally:
-        freeknots.reduce_free = real
+        freeknots._reduce_block = real
 
 
 def _mobile(anim) -> list[str]:

@@ -2,9 +2,8 @@
 
 Calibrated by bench_playback on the capture-like face and the sample (2-core machine, software raster, shared):
 a path costs its paint, a d animation re-lays its path every frame, and a (discrete) colour animation restyles
-it at a cost that grows with the document's paths: at 1x about 0.003 ms each among 744 paths, 0.025 among 1,710
-and 0.08 among 5,852, so the model charges colour animations x paths. A class, not a promise: the measurements
-scatter by +-40 % on a shared machine.
+it at a cost that grows with the document's paths (at 4x about 0.2 ms each among 744 paths, 0.5 among 5,852).
+A class, not a promise: the measurements scatter by +-40 % on a shared machine, more for single runs.
 """
 
 from __future__ import annotations
@@ -13,7 +12,8 @@ from collections.abc import Mapping
 
 MS_PER_PATH = 0.02  # paint of one path, 4x throttling
 MS_PER_D = 0.07  # one animated d
-MS_PER_COLOR_PATH = 5e-5  # one animated colour, per path of the document
+MS_PER_COLOR = 0.15  # one animated colour
+MS_PER_COLOR_PATH = 6e-5  # and its growth with the document's paths
 CLASSES = ((1000 / 30, "plays smoothly on phones"),  # >= 30 fps at 4x (a mid-range phone)
            (1000 / 10, "plays smoothly on desktops, slowly on phones"))  # >= 10 fps at 4x, ~30+ at 1x
 HEAVY = "heavy"
@@ -22,7 +22,7 @@ HEAVY = "heavy"
 def predict_ms(counts: Mapping[str, int]) -> float:
     """Predicted main-thread ms per frame at 4x CPU throttling from a Report's counts."""
     return (MS_PER_PATH * counts.get("paths", 0) + MS_PER_D * counts.get("animated_paths", 0)
-            + MS_PER_COLOR_PATH * counts.get("color_animations", 0) * counts.get("paths", 0))
+            + counts.get("color_animations", 0) * (MS_PER_COLOR + MS_PER_COLOR_PATH * counts.get("paths", 0)))
 
 
 def playback_class(ms: float) -> str:

@@ -51,7 +51,7 @@ STROKE_PX = 0.5  # stroke of the fill colour hides anti-aliasing seams between n
 COLOR_TIME_LEVELS = 0.1  # of which rounding the colour keyTimes may take
 BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime): what groups weigh
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
-RAW_COUNT_PATHS = 1024  # paths per block when counting the raw encoding's bytes
+RAW_COUNT_VERTICES = 4096  # vertices per block when counting the raw encoding's bytes
 COLOR_ERROR_CELLS = 1 << 18  # frames x paths per block when measuring the colour error for the report
 RAW_WRITE_PATHS = 128  # paths per block when writing it (its one format call holds 18 objects per tri-frame)
 
@@ -462,15 +462,20 @@ def _merged_band(track: np.ndarray, active: np.ndarray, radius: np.ndarray, gain
 def raw_values_bytes(xy: np.ndarray, corners: np.ndarray) -> int:
     """Exact bytes of the raw encoding's d values for the triangles of vertex ids corners (P, 3) over xy
     (T, V, 2) px: every frame plus the held last, 'M x,y L x,y L x,y Z' with 2 decimals, ';' between (the bulk
-    of a raw file; counted, not written, a block of paths at a time)."""
+    of a raw file; counted, not written). A vertex's text is the same in every path that has it, so each used
+    vertex is counted once per frame and weighted by its uses, a block of vertices at a time."""
     t, p = xy.shape[0], len(corners)
+    if not p or not t:
+        return 0
+    uses = np.bincount(np.asarray(corners).ravel(), minlength=xy.shape[1])
+    verts = np.flatnonzero(uses)
     total = 0
-    for a in range(0, p, RAW_COUNT_PATHS):
-        block = xy[:, corners[a:a + RAW_COUNT_PATHS]].reshape(t, -1, 6)
-        c = np.rint(np.asarray(block, np.float64) * 100).astype(np.int64)
-        per_value = (_digits(np.abs(c) // 100) + 3 + (c < 0)).sum(axis=2) + 7 + 1  # numbers, M L L Z, commas, ';'
-        total += int(per_value.sum() + per_value[-1].sum())
-    return total - p
+    for a in range(0, len(verts), RAW_COUNT_VERTICES):
+        v = verts[a:a + RAW_COUNT_VERTICES]
+        c = np.rint(np.asarray(xy[:, v], np.float64) * 100).astype(np.int64)
+        per = (_digits(np.abs(c) // 100) + 3 + (c < 0)).sum(axis=2)  # (T, n): "x.xx" "y.yy" of each vertex
+        total += int(((per.sum(axis=0) + per[-1]) * uses[v]).sum())
+    return total + (t + 1) * p * (7 + 1) - p  # M L L Z and two commas per value, ';' between values
 
 
 def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.ndarray, dur: str,

@@ -239,13 +239,20 @@ def test_still_frame_is_static_and_exact_to_grid():
     assert b"<animate" not in data and len(paths(data)) == anim.n_faces - 1
 
 
-def test_raw_size_is_counted_exactly_without_writing():
+def test_raw_size_is_counted_exactly_without_writing(monkeypatch):
     rng = np.random.default_rng(4)
     track = rng.uniform(-150, 1500, (9, 7, 6))
     track[0, 0, 0] = -0.004  # rounds to zero: written and counted without a sign
     per_path = [";".join(svg_anim._raw_strings(track[:, j]) + svg_anim._raw_strings(track[-1:, j])) for j in range(7)]
     xy = track.reshape(9, 21, 2)  # every triangle its own three vertices
     assert svg_anim.raw_values_bytes(xy, np.arange(21).reshape(7, 3)) == sum(len(v) for v in per_path)
+    # Shared vertices (a fan, one vertex in every triangle), some unused, counted in blocks of 4 vertices.
+    corners = np.array([[0, 1 + j, 2 + j] for j in range(8)] + [[3, 0, 5]])
+    xy = rng.uniform(-150, 1500, (9, 14, 2))
+    tracks = [xy[:, c].reshape(9, 6) for c in corners]
+    per_path = [";".join(svg_anim._raw_strings(tr) + svg_anim._raw_strings(tr[-1:])) for tr in tracks]
+    monkeypatch.setattr(svg_anim, "RAW_COUNT_VERTICES", 4)
+    assert svg_anim.raw_values_bytes(xy, corners) == sum(len(v) for v in per_path)
 
 
 def test_offsets_shorten_keys_only_where_they_pay():
