@@ -37,9 +37,9 @@ from converter.outputs import output_kind
 
 TITLE = "Conversion speed and memory (issue 16)"
 QUICK = os.environ.get("FACESVG_BENCH_QUICK", "") not in ("", "0")
-# (label, frames, generator triangles, midpoint subdivisions)
 CAPTURE = (FRAMES, 8000, 0)  # the capture-like face (bench/capture_like.py): the headline case
 CAPTURE_RUNS = 3  # its runs (median by CPU); every other case runs once
+# (frames, generator triangles, midpoint subdivisions)
 FRAME_CASES = ((100, 8000, 0), (FRAMES, 8000, 0), (1000, 8000, 0), (3000, 8000, 0))
 TRIANGLE_CASES = ((FRAMES, 2000, 0), (FRAMES, 8000, 0), (FRAMES, 8000, 1), (FRAMES, 8000, 2))
 QUICK_FRAMES, QUICK_TRIANGLES = 1000, 40000
