@@ -542,9 +542,9 @@ def _raw_block(rgb: np.ndarray, active: np.ndarray, track: np.ndarray, ids: list
     return out
 
 
-def _linear(attribute: str, pk: np.ndarray, p: int, text: list[str], kt_text: list[str], dur: str,
+def _keyed(attribute: str, pk: np.ndarray, p: int, text: list[str], kt_text: list[str], dur: str,
             animate: np.ndarray, discrete: bool = False) -> tuple[list[str], list[str], int]:
-    """Per path a linear (or discrete: each value held until the next key) <animate> through its keys (pk: the
+    """Per path an <animate> through its keys, linear or (discrete) each value held until the next key (pk: the
     path of each key, sorted; value and keyTimes texts path-major) where animate[j]."""
     mode = 'calcMode="discrete" ' if discrete else ""
     bounds = np.searchsorted(pk, np.arange(p + 1)).tolist()
@@ -686,7 +686,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     off = offsets(rows, pk, p)
     off[~moving] = 0
     text = _path_strings(rows, off[pk])
-    d_anims, d_first, n_keys = _linear("d", pk, p, text, kt_text, dur, moving)
+    d_anims, d_first, n_keys = _keyed("d", pk, p, text, kt_text, dur, moving)
     counts = np.bincount(pk, minlength=p)
     d_len = np.array([len(a) for a in d_anims])
     d_len[~active.all(axis=0)] = 0  # evenly spaced keys cannot collapse a hidden triangle
@@ -713,7 +713,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     c_vary = _varying(cpk, p, crow)
     # A step shows from frame k: placed half a frame early, rounded by at most a quarter frame.
     c_dec = math.ceil(math.log10(2 * max(t, 1)))
-    c_anims, _, n_color_keys = _linear("color", cpk, p, _hex(crow).tolist(), key_times(cfk, t, c_dec, "early"),
+    c_anims, _, n_color_keys = _keyed("color", cpk, p, _hex(crow).tolist(), key_times(cfk, t, c_dec, "early"),
                                        dur, c_vary, discrete=True)
     n_uniform = len(d_uniform)
     cbounds = np.searchsorted(cpk, np.arange(p + 1))[:-1]
