@@ -11,8 +11,9 @@ compact binary block and plays it with a small script (converter/writers/player.
   applied once when the player expands the keys), their radius divided by its largest magnification;
 - per path (the SVG's drawing order, converter.encode.order.draw_list) its triangle's vertices and its
   visibility as change frames;
-- colours keyed like the SVG's (svg_anim.color_keys within COLOR_LEVELS levels): per path for
-  flat shading, per vertex for Gouraud (WebGL interpolates vertex colours linearly: exact Gouraud).
+- colours as linear keys within COLOR_LEVELS levels (svg_anim.color_keys; the SVG holds discrete steps instead,
+  which Chromium's SMIL plays faster, while interpolating costs WebGL nothing): per path for flat shading, per
+  vertex for Gouraud (WebGL interpolates vertex colours linearly: exact Gouraud).
 
 Frame k shows at t = k / fps; between frames the player interpolates linearly, as SMIL does; the last key
 of every track sits at frame T, the loop end. The SVG's band transforms inside the head are not used.
@@ -122,8 +123,8 @@ def _vertex_active(active: np.ndarray, path_vertices: np.ndarray, n_vertices: in
 
 
 def _color_keys(rgb: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Colour tracks (T, N, 3) 0..1 keyed like the SVG's exact colours (svg_anim.color_keys within
-    COLOR_LEVELS levels, its bound kept where keys fall outside 0..255), packed."""
+    """Colour tracks (T, N, 3) 0..1 as linear keys within COLOR_LEVELS levels (svg_anim.color_keys, its bound
+    kept where keys fall outside 0..255), packed."""
     ck = svg_anim.color_keys(rgb, active, COLOR_LEVELS)
     return _pack_keys(ck.mask, ck.values)
 
