@@ -12,10 +12,12 @@
   const WIDE = 2;
   const HEAD = 4;
   const STROKE_PX = 0.5; // the SVG's seam stroke (svg_anim.STROKE_PX)
+  const SLOW_WINDOW = 30; // played frames judged together for multisampling
+  const SLOW_FPS = 45; // below this median frame rate the player drops multisampling
 
   const $ = (id) => document.getElementById(id);
   const root = $("facesvg-player");
-  const canvas = $("facesvg-canvas");
+  let canvas = $("facesvg-canvas");
   const message = $("facesvg-message");
   const playButton = $("facesvg-play");
   const scrub = $("facesvg-scrub");
@@ -249,18 +251,72 @@
     };
   }
 
-  // Renderers: draw(positions (x, y px per drawn corner), colours (r, g, b, 255 per corner), corners).
-  function webglRenderer(cv, width, height) {
-    let gl = null;
-    try {
-      gl = cv.getContext("webgl", { antialias: true, alpha: true, premultipliedAlpha: true, depth: false });
-    } catch (e) {
-      gl = null;
+  // Renderers: frame(f, w) draws frame f + w (0 <= w <= 1) of the decoded animation.
+  // WebGL 2 evaluates the animation on the GPU: the expanded tracks, colours and visibility are textures, each
+  // corner's vertex shader interpolates its triangle's three vertices, grows it like grow() below and drops it
+  // when hidden, so a frame costs the script two uniforms. The other renderers take the corners from cpuFrames().
+  const GL2_VS = `#version 300 es
+precision highp float;
+precision highp int;
+uniform highp sampler2D xy; // RG32F, texel f * vertices + v: px
+uniform mediump sampler2D rgb; // RGB8, texel f * tracks + track
+uniform mediump sampler2D shown; // R8, texel f * paths + path
+uniform int f;
+uniform float w;
+uniform int nv;
+uniform int nc;
+uniform int np;
+uniform bool gouraud;
+uniform vec2 s;
+uniform float half_px;
+in uvec3 tri; // this corner's vertex, the next and the previous one of its triangle
+out vec4 v;
+ivec2 at(int i, int width) { return ivec2(i % width, i / width); }
+vec2 pos(uint id) {
+  int width = textureSize(xy, 0).x;
+  int i = f * nv + int(id);
+  vec2 a = texelFetch(xy, at(i, width), 0).rg;
+  return a + w * (texelFetch(xy, at(i + nv, width), 0).rg - a);
+}
+vec3 colour(int track) {
+  int width = textureSize(rgb, 0).x;
+  int i = f * nc + track;
+  vec3 a = texelFetch(rgb, at(i, width), 0).rgb * 255.0;
+  return floor(a + w * (texelFetch(rgb, at(i + nc, width), 0).rgb * 255.0 - a) + 0.5) / 255.0;
+}
+bool usable(vec2 u, vec2 t) { // grow()'s conditions at one corner (unit edges u, t)
+  vec2 b = u + t;
+  return length(b) > 1e-9 && sqrt(max(0.0, (1.0 - dot(u, t)) / 2.0)) > 1e-9;
+}
+void main() {
+  int path = gl_VertexID / 3;
+  if (texelFetch(shown, at(f * np + path, textureSize(shown, 0).x), 0).r == 0.0) { // 1 (shown) reads 1/255
+    gl_Position = vec4(2.0, 2.0, 2.0, 1.0); // outside the clip volume: the triangle is dropped
+    v = vec4(0.0);
+    return;
+  }
+  vec2 a = pos(tri.x), b = pos(tri.y), c = pos(tri.z);
+  vec2 e = b - a, g = c - b, h = a - c;
+  float le = length(e), lg = length(g), lh = length(h);
+  vec2 q = a;
+  if (le > 1e-9 && lg > 1e-9 && lh > 1e-9) {
+    e /= le; g /= lg; h /= lh;
+    if (usable(e, -h) && usable(g, -e) && usable(h, -g)) {
+      vec2 bis = e - h;
+      float sinHalf = sqrt(max(0.0, (1.0 - dot(e, -h)) / 2.0));
+      q = a - bis * (min(half_px / sinHalf, 2.0 * half_px) / length(bis));
     }
-    if (!gl) return null;
-    const vs = "attribute vec2 p;attribute vec4 c;uniform vec2 s;varying vec4 v;" +
-      "void main(){gl_Position=vec4(p.x*s.x-1.0,1.0-p.y*s.y,0.0,1.0);v=c;}";
-    const fs = "precision mediump float;varying vec4 v;void main(){gl_FragColor=v;}";
+  }
+  v = vec4(colour(gouraud ? int(tri.x) : path), 1.0);
+  gl_Position = vec4(q.x * s.x - 1.0, 1.0 - q.y * s.y, 0.0, 1.0);
+}`;
+  const GL2_FS = `#version 300 es
+precision mediump float;
+in vec4 v;
+out vec4 o;
+void main() { o = v; }`;
+
+  function program(gl, vs, fs) {
     const prog = gl.createProgram();
     for (const [type, src] of [[gl.VERTEX_SHADER, vs], [gl.FRAGMENT_SHADER, fs]]) {
       const sh = gl.createShader(type);
@@ -270,7 +326,103 @@
       gl.attachShader(prog, sh);
     }
     gl.linkProgram(prog);
-    if (!gl.getProgramParameter(prog, gl.LINK_STATUS)) return null;
+    return gl.getProgramParameter(prog, gl.LINK_STATUS) ? prog : null;
+  }
+
+  function webgl2Renderer(cv, anim, antialias) {
+    let gl = null;
+    try {
+      gl = cv.getContext("webgl2", { antialias, alpha: true, premultipliedAlpha: true, depth: false });
+    } catch (e) {
+      gl = null;
+    }
+    if (!gl) return null;
+    const { h, gouraud, pathVertices, xy, rgb, shown } = anim;
+    const prog = program(gl, GL2_VS, GL2_FS);
+    if (!prog) return null;
+    const maxSize = gl.getParameter(gl.MAX_TEXTURE_SIZE);
+    const width = Math.min(maxSize, 4096);
+    // One texture of n texels (rows of `width`), unfiltered; null when it does not fit.
+    function texture(unit, internal, format, type, data, channels) {
+      const n = data.length / channels;
+      const rows = Math.max(1, Math.ceil(n / width));
+      if (rows > maxSize) return null;
+      const tex = gl.createTexture();
+      gl.activeTexture(gl.TEXTURE0 + unit);
+      gl.bindTexture(gl.TEXTURE_2D, tex);
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+      gl.texStorage2D(gl.TEXTURE_2D, 1, internal, width, rows);
+      const full = Math.floor(n / width);
+      if (full) gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, width, full, format, type, data.subarray(0, full * width * channels));
+      if (n > full * width) {
+        gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, full, n - full * width, 1, format, type,
+          data.subarray(full * width * channels));
+      }
+      return tex;
+    }
+    gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
+    if (!texture(0, gl.RG32F, gl.RG, gl.FLOAT, xy, 2) || !texture(1, gl.RGB8, gl.RGB, gl.UNSIGNED_BYTE, rgb, 3) ||
+        !texture(2, gl.R8, gl.RED, gl.UNSIGNED_BYTE, shown, 1)) {
+      return null;
+    }
+    // Per corner: its vertex, then the next and previous vertex of its triangle.
+    const p = h.paths;
+    const tri = new Uint32Array(9 * p);
+    for (let j = 0; j < p; j++) {
+      for (let c = 0; c < 3; c++) {
+        for (let k = 0; k < 3; k++) tri[9 * j + 3 * c + k] = pathVertices[3 * j + (c + k) % 3];
+      }
+    }
+    gl.useProgram(prog);
+    const buf = gl.createBuffer();
+    gl.bindBuffer(gl.ARRAY_BUFFER, buf);
+    gl.bufferData(gl.ARRAY_BUFFER, tri, gl.STATIC_DRAW);
+    const tLoc = gl.getAttribLocation(prog, "tri");
+    gl.enableVertexAttribArray(tLoc);
+    gl.vertexAttribIPointer(tLoc, 3, gl.UNSIGNED_INT, 0, 0);
+    const u = (name) => gl.getUniformLocation(prog, name);
+    gl.uniform1i(u("xy"), 0);
+    gl.uniform1i(u("rgb"), 1);
+    gl.uniform1i(u("shown"), 2);
+    gl.uniform1i(u("nv"), h.vertices);
+    gl.uniform1i(u("nc"), h.colorTracks);
+    gl.uniform1i(u("np"), p);
+    gl.uniform1i(u("gouraud"), gouraud ? 1 : 0);
+    gl.uniform2f(u("s"), 2 / h.width, 2 / h.height);
+    gl.uniform1f(u("half_px"), HALF);
+    const fLoc = u("f");
+    const wLoc = u("w");
+    gl.disable(gl.DEPTH_TEST); // painter's order: later triangles cover earlier ones
+    if (gl.getError() !== gl.NO_ERROR) return null;
+    return {
+      name: "webgl2",
+      gl,
+      frame(f, w) {
+        gl.viewport(0, 0, cv.width, cv.height);
+        gl.clearColor(0, 0, 0, 0);
+        gl.clear(gl.COLOR_BUFFER_BIT);
+        gl.uniform1i(fLoc, f);
+        gl.uniform1f(wLoc, w);
+        gl.drawArrays(gl.TRIANGLES, 0, 3 * p);
+      },
+    };
+  }
+
+  // draw(positions (x, y px per drawn corner), colours (r, g, b, 255 per corner), corners).
+  function webglRenderer(cv, width, height, antialias) {
+    let gl = null;
+    try {
+      gl = cv.getContext("webgl", { antialias, alpha: true, premultipliedAlpha: true, depth: false });
+    } catch (e) {
+      gl = null;
+    }
+    if (!gl) return null;
+    const vs = "attribute vec2 p;attribute vec4 c;uniform vec2 s;varying vec4 v;" +
+      "void main(){gl_Position=vec4(p.x*s.x-1.0,1.0-p.y*s.y,0.0,1.0);v=c;}";
+    const fs = "precision mediump float;varying vec4 v;void main(){gl_FragColor=v;}";
+    const prog = program(gl, vs, fs);
+    if (!prog) return null;
     gl.useProgram(prog);
     const posBuf = gl.createBuffer();
     const colBuf = gl.createBuffer();
@@ -282,6 +434,7 @@
     gl.disable(gl.DEPTH_TEST); // painter's order: later triangles cover earlier ones
     return {
       name: "webgl",
+      gl,
       draw(pos, col, corners) {
         gl.viewport(0, 0, cv.width, cv.height);
         gl.clearColor(0, 0, 0, 0);
@@ -356,36 +509,17 @@
     return true;
   }
 
-  function start(anim) {
+  // The CPU side of the WebGL 1 and canvas 2D renderers: each frame's corners, then draw(pos, col, corners).
+  function cpuFrames(anim, draw, grows) {
     const { h, gouraud, pathVertices, xy, rgb, shown } = anim;
     const p = h.paths;
     const nv = h.vertices;
     const nc = h.colorTracks;
-    const duration = h.frames / h.fps;
-    const dpr = Math.max(1, window.devicePixelRatio || 1);
-    canvas.width = Math.round(h.width * dpr);
-    canvas.height = Math.round(h.height * dpr);
-    canvas.style.width = h.width + "px";
-    const wanted = (window.facesvgPlayerOptions || {}).renderer; // "canvas2d" skips WebGL (tests, comparisons)
-    const renderer = (wanted !== "canvas2d" && webglRenderer(canvas, h.width, h.height)) ||
-      canvasRenderer(canvas, h.width, h.height);
-    if (!renderer) throw new Corrupt("this browser can draw neither WebGL nor canvas 2D");
     const pos = new Float32Array(2 * 3 * p);
     const col = new Uint8Array(4 * 3 * p);
     const vxy = new Float32Array(2 * nv);
     const vrgb = new Float32Array(3 * nc);
-
-    let time = 0; // seconds into the animation
-    let playing = !window.matchMedia("(prefers-reduced-motion: reduce)").matches;
-    let clockStart = null; // rAF timestamp at which `time` was `clockTime`
-    let clockTime = 0;
-    let drawnTime = -1;
-
-    function render(t) {
-      const u = Math.min(Math.max(t, 0), duration) * h.fps; // frames
-      let f = Math.floor(u);
-      if (f >= h.frames) f = h.frames - 1;
-      const w = u - f;
+    return (f, w) => {
       const a = f * nv * 2;
       const b = a + nv * 2;
       for (let i = 0; i < 2 * nv; i++) vxy[i] = xy[a + i] + w * (xy[b + i] - xy[a + i]);
@@ -407,9 +541,71 @@
           col[4 * n + 3] = 255;
           n++;
         }
-        if (renderer.name === "webgl") grow(pos, n - 3);
+        if (grows) grow(pos, n - 3);
       }
-      renderer.draw(pos, col, n);
+      draw(pos, col, n);
+    };
+  }
+
+  // A new canvas in place of one a failed renderer has claimed (a canvas keeps its first context type).
+  function freshCanvas() {
+    const next = canvas.cloneNode(false);
+    canvas.replaceWith(next);
+    canvas = next;
+    return next;
+  }
+
+  // The first renderer that works, from `wanted` ("webgl2", "webgl" or "canvas2d") down; WebGL multisampled when
+  // antialias is set.
+  function pickRenderer(anim, wanted, antialias) {
+    const { h } = anim;
+    const order = ["webgl2", "webgl", "canvas2d"];
+    for (const name of order.slice(Math.max(0, order.indexOf(wanted)))) {
+      let r = null;
+      if (name === "webgl2") {
+        r = webgl2Renderer(canvas, anim, antialias);
+      } else if (name === "webgl") {
+        const gl1 = webglRenderer(canvas, h.width, h.height, antialias);
+        r = gl1 && { name, frame: cpuFrames(anim, gl1.draw, true), gl: gl1.gl };
+      } else {
+        const c2 = canvasRenderer(canvas, h.width, h.height);
+        r = c2 && { name, frame: cpuFrames(anim, c2.draw, false) };
+      }
+      if (r) return r;
+      freshCanvas();
+    }
+    return null;
+  }
+
+  function start(anim) {
+    const { h, xy } = anim;
+    const nv = h.vertices;
+    const duration = h.frames / h.fps;
+    const dpr = Math.max(1, window.devicePixelRatio || 1);
+    canvas.width = Math.round(h.width * dpr);
+    canvas.height = Math.round(h.height * dpr);
+    canvas.style.width = h.width + "px";
+    // facesvgPlayerOptions (tests, comparisons): renderer ("webgl" or "canvas2d") starts lower down the list;
+    // antialias true or false pins WebGL's multisampling, which is otherwise dropped when frames come late.
+    const options = window.facesvgPlayerOptions || {};
+    const autoAA = options.antialias === undefined || options.antialias === "auto";
+    let antialias = autoAA || options.antialias === true;
+    let renderer = pickRenderer(anim, options.renderer, antialias);
+    if (!renderer) throw new Corrupt("this browser can draw neither WebGL nor canvas 2D");
+    const intervals = []; // ms between played frames, judged SLOW_WINDOW at a time
+    let lastNow = null;
+
+    let time = 0; // seconds into the animation
+    let playing = !window.matchMedia("(prefers-reduced-motion: reduce)").matches;
+    let clockStart = null; // rAF timestamp at which `time` was `clockTime`
+    let clockTime = 0;
+    let drawnTime = -1;
+
+    function render(t) {
+      const u = Math.min(Math.max(t, 0), duration) * h.fps; // frames
+      let f = Math.floor(u);
+      if (f >= h.frames) f = h.frames - 1;
+      renderer.frame(f, u - f);
       drawnTime = t;
       scrub.value = String(t);
       timeLabel.textContent = t.toFixed(2) + " s";
@@ -423,7 +619,34 @@
       playButton.setAttribute("aria-pressed", on ? "true" : "false");
     }
 
+    // Multisampling costs a software-rendered or weak GPU most of its frame. When the median of SLOW_WINDOW
+    // played frames misses SLOW_FPS, the player draws on without it (a new canvas: a context keeps its
+    // attributes), once and for the rest of the page's life.
+    function watchPace(now) {
+      if (!playing || !autoAA || !antialias || !renderer.gl) {
+        lastNow = null;
+        return;
+      }
+      if (lastNow !== null) intervals.push(now - lastNow);
+      lastNow = now;
+      if (intervals.length < SLOW_WINDOW) return;
+      const median = intervals.sort((a, b) => a - b)[SLOW_WINDOW >> 1];
+      intervals.length = 0;
+      if (median * (options.slowFps || SLOW_FPS) <= 1000) return;
+      const before = renderer;
+      const lose = before.gl.getExtension("WEBGL_lose_context");
+      freshCanvas();
+      const next = pickRenderer(anim, before.name, false);
+      if (!next) return; // cannot happen for a renderer that worked; keep drawing nothing rather than fail
+      antialias = false;
+      renderer = next;
+      api.renderer = next.name;
+      if (lose) lose.loseContext();
+      drawnTime = -1;
+    }
+
     function frame(now) {
+      watchPace(now);
       if (playing) {
         if (clockStart === null) {
           clockStart = now;
@@ -455,7 +678,9 @@
     scrub.max = String(duration);
     scrub.step = String(1 / h.fps / 4);
     playButton.addEventListener("click", () => setPlaying(!playing));
-    canvas.addEventListener("click", () => setPlaying(!playing));
+    root.addEventListener("click", (e) => { // on the root: a new canvas may replace this one
+      if (e.target === canvas) setPlaying(!playing);
+    });
     document.addEventListener("keydown", (e) => {
       if (e.code === "Space" && e.target === document.body) {
         e.preventDefault();
@@ -476,6 +701,7 @@
     Object.defineProperties(api, { // live values (Object.assign would copy a getter's value once)
       time: { get: () => time, enumerable: true },
       playing: { get: () => playing, enumerable: true },
+      antialias: { get: () => antialias, enumerable: true }, // WebGL multisampling in use
     });
     setPlaying(playing);
     render(0);
