@@ -7,9 +7,13 @@ registry's writers for `--to svg` (the default SVG) and `--to player`, each time
 projection, then opened as a document from a loopback server and played in headless Chromium (bench/playback.py
 `measure`) at 1x / 4x / 6x CPU throttling; each cell is the median of RUNS runs. The Chromium flags are the
 tests' (tests/conftest.py CHROMIUM_ARGS: --disable-gpu), under which WebGL runs on SwiftShader (software, in
-the GPU process); the renderer the player picked is reported. A second row per face plays the same file with
-multisampling off (the string `antialias: true` patched in the served copy), to show what SwiftShader's 4x MSAA
-costs: a phone's GPU resolves it in hardware.
+the GPU process); the renderer the player picked is reported.
+
+Variants per face, each a copy of the same file with `window.facesvgPlayerOptions` set before the player's script:
+the default (WebGL 2, multisampled until the median of 30 played frames falls below 45 fps; the share of runs that
+dropped it is reported), WebGL 2 with multisampling pinned on and off, and WebGL 1 pinned on (the script computes
+every frame's corners: the player before the GPU evaluation). A floor row plays a page that only clears a WebGL 2
+canvas of the same size every frame: no WebGL player can beat it under these flags.
 """
 
 from __future__ import annotations
@@ -63,14 +67,47 @@ def _renderer(browser, url: str) -> str:
         page.close()
 
 
-def _playback(browser, url: str, size: int) -> list[tuple[float, float, float]]:
-    """Per throttling rate the medians of (fps rAF, fps changed, main ms per frame) over RUNS runs."""
-    out = []
+# Variants: (name, facesvgPlayerOptions or None for the file as written).
+VARIANTS = (("default", None), ("WebGL 2, MSAA on", {"antialias": True}),
+            ("WebGL 2, MSAA off", {"antialias": False}), ("WebGL 1 (script), MSAA on", {"renderer": "webgl",
+                                                                                      "antialias": True}))
+_STATE = "() => window.facesvgPlayer ? [facesvgPlayer.renderer, facesvgPlayer.antialias] : null"
+FLOOR = """<!doctype html><html><body style="margin:0"><canvas id="c" width="{size}" height="{size}"></canvas><script>
+const gl = document.getElementById("c").getContext("webgl2", {{antialias: true, depth: false}});
+let k = 0;
+function f() {{ k++; gl.clearColor((k % 60) / 60, 0.5, 0.5, 1); gl.clear(gl.COLOR_BUFFER_BIT);
+  requestAnimationFrame(f); }}
+requestAnimationFrame(f);
+</script></body></html>"""
+
+
+def _with_options(html: bytes, options: dict | None) -> bytes:
+    """The player file with facesvgPlayerOptions set before its script runs."""
+    if options is None:
+        return html
+    at = html.rindex(b"<script>")
+    return html[:at] + b"<script>window.facesvgPlayerOptions = " + json.dumps(options).encode() + b";</script>" \
+        + html[at:]
+
+
+def _playback(browser, url: str, size: int) -> tuple[list[tuple[float, float, float, float]], list[str]]:
+    """Per throttling rate the medians of (fps rAF, fps changed, main ms, script ms per frame) over RUNS runs, and per
+    rate
+    how many runs ended with multisampling on ("3/3")."""
+    out, kept = [], []
     for rate in THROTTLES:
-        runs = [measure(browser, url, size, rate, SECONDS) for _ in range(RUNS)]
+        runs = [measure(browser, url, size, rate, SECONDS, state=_STATE) for _ in range(RUNS)]
         out.append((statistics.median(r.fps_raf for r in runs), statistics.median(r.fps_changed for r in runs),
-                    statistics.median(r.main_ms for r in runs)))
-    return out
+                    statistics.median(r.main_ms for r in runs), statistics.median(r.script_ms for r in runs)))
+        kept.append(f"{sum(bool(r.state and r.state[1]) for r in runs)}/{len(runs)}")
+    return out, kept
+
+
+def _row(label: str, name: str, renderer: str, cells, kept: list[str]) -> str:
+    return (f"| {label} | {name} | {renderer} | " + " / ".join(f"{c[0]:.1f}" for c in cells)
+            + " | " + " / ".join(f"{c[1]:.1f}" for c in cells)
+            + " | " + " / ".join(f"{c[2]:.1f}" for c in cells) + " | " + " / ".join(f"{c[3]:.1f}" for c in cells)
+            + " | " + " / ".join(kept) + " |")
 
 
 def _main_thread(browser, url: str, size: int) -> tuple[float, float]:
@@ -118,20 +155,22 @@ def run() -> str:
                 f"| {report.counts['keys']:,} | {len(html) / 1024:,.0f} / {_gz(html) / 1024:,.0f} "
                 f"| {len(svg) / 1024:,.0f} / {_gz(svg) / 1024:,.0f} | {_gz(html) / _gz(svg):.2f} "
                 f"| {player_cpu:.1f} / {svg_cpu:.1f} | {v.max_px:.3f} ({'OK' if v.ok else 'FAIL'}) |")
-            (folder / f"p{i}.html").write_bytes(html)
-            (folder / f"p{i}-noaa.html").write_bytes(html.replace(b"antialias: true", b"antialias: false", 1))
+            for j, (_, opts) in enumerate(VARIANTS):
+                (folder / f"p{i}-{j}.html").write_bytes(_with_options(html, opts))
             served.append((label, sheet.camera.width))
+        size = served[-1][1]
+        (folder / "floor.html").write_text(FLOOR.format(size=size))
         with serve(folder) as base, chromium() as browser:
             for i, (label, size) in enumerate(served):
-                renderer = _renderer(browser, f"{base}/p{i}.html")
-                busy, readback = _main_thread(browser, f"{base}/p{i}.html", size)
+                busy, readback = _main_thread(browser, f"{base}/p{i}-1.html", size)
                 trace_rows.append(f"| {label} | {busy:.0f} | {100 * readback:.0f}% |")
-                for variant, name in (("", "default"), ("-noaa", "MSAA off")):
-                    cells = _playback(browser, f"{base}/p{i}{variant}.html", size)
-                    play_rows.append(
-                        f"| {label} | {name} | {renderer} | " + " / ".join(f"{c[0]:.1f}" for c in cells)
-                        + " | " + " / ".join(f"{c[1]:.1f}" for c in cells)
-                        + " | " + " / ".join(f"{c[2]:.1f}" for c in cells) + " |")
+                for j, (name, _) in enumerate(VARIANTS):
+                    url = f"{base}/p{i}-{j}.html"
+                    cells, kept = _playback(browser, url, size)
+                    play_rows.append(_row(label, name, _renderer(browser, url), cells, kept))
+            cells, _ = _playback(browser, f"{base}/floor.html", size)
+            play_rows.append(_row(f"floor: an empty {size} px canvas", "cleared every frame", "webgl2", cells,
+                                  ["-"] * len(cells)))
     return (
         "Both faces at the default options (512 px, tolerance 0.25 px). Sizes in KB raw / gzip -9; write = CPU "
         "seconds of the writer alone (the Sheet is shared); max px = the verifier's largest deviation of a drawn "
@@ -141,14 +180,19 @@ def run() -> str:
         + "\n".join(size_rows) + "\n\n"
         f"Playback of the player as a document, {SECONDS:.0f} s per run, median of {RUNS} runs per rate "
         "(1x / 4x / 6x CPU throttling); fps rAF = requestAnimationFrame callbacks per second, fps changed = "
-        "screencast frames whose pixels changed, main ms = main-thread task time per frame (bench/playback.py). "
+        "screencast frames whose pixels changed, main ms = main-thread task time per frame, script ms = its "
+        "JavaScript (the player's and the bench's own frame counter; bench/playback.py). "
         "The machine (2 cores) was shared with other jobs while this ran: read the figures as a range.\n\n"
-        "| face | variant | renderer | fps rAF 1x / 4x / 6x | fps changed | main ms/frame |\n"
-        "|---|---|---|---|---|---|\n" + "\n".join(play_rows) + "\n\n"
-        "Where the main thread's time goes while the player plays (default variant, 1x, a 2 s Chromium trace): "
+        "Under --disable-gpu the compositor reads every WebGL frame back synchronously: even the empty canvas of "
+        "the floor row costs the main thread 4-5 ms a frame at 1x, so 60 fps at 4x is out of reach for any WebGL "
+        "page here. On a phone the GPU composites the canvas without that readback.\n\n"
+        "MSAA kept = runs that ended with multisampling on (the default drops it when frames come late).\n\n"
+        "| face | variant | renderer | fps rAF 1x / 4x / 6x | fps changed | main ms/frame | script ms/frame "
+        "| MSAA kept |\n|---|---|---|---|---|---|---|---|\n" + "\n".join(play_rows) + "\n\n"
+        "Where the main thread's time goes while the player plays (WebGL 2, MSAA on, 1x, a 2 s Chromium trace): "
         "busy = main-thread task ms per second; readback = the share of it inside GLES2::ReadPixels, where the "
         "software compositor (--disable-gpu) waits for SwiftShader to finish the WebGL frame and copies it back. "
-        "The player's own script takes well under a millisecond per frame.\n\n"
+        "With WebGL 2 the player's script sets two uniforms a frame.\n\n"
         "| face | busy ms/s | readback |\n|---|---|---|\n" + "\n".join(trace_rows) + "\n"
     )
 

@@ -32,8 +32,10 @@ class Playback(NamedTuple):
     fps_raf: float  # requestAnimationFrame callbacks per second
     fps_changed: float  # screencast frames whose pixels changed, per second
     main_ms: float  # main-thread task milliseconds per rAF frame
+    script_ms: float  # of which JavaScript, milliseconds per rAF frame
     first_frame_ms: float  # navigation start to the first animation frame after load
     renderer_mb: float  # resident memory of the renderer processes after the run
+    state: object = None  # what the `state` expression of measure() gave at the end of the run
 
 
 @contextmanager
@@ -81,9 +83,9 @@ def host_page(svg_name: str, size: int) -> str:
 
 
 def measure(browser: Browser, url: str, size: int, throttle: float, seconds: float,
-            load_seconds: float = 300.0) -> Playback | None:
+            load_seconds: float = 300.0, state: str | None = None) -> Playback | None:
     """Play the page at url for `seconds` under `throttle`x CPU slowdown and measure it; None when it shows no
-    frame within load_seconds."""
+    frame within load_seconds. state: a JavaScript function evaluated in the page after the run (Playback.state)."""
     context = browser.new_context(viewport={"width": size, "height": size})
     page = context.new_page()
     cdp = context.new_cdp_session(page)
@@ -107,6 +109,7 @@ def measure(browser: Browser, url: str, size: int, throttle: float, seconds: flo
 
         cdp.on("Page.screencastFrame", on_frame)
         before = _task_seconds(cdp)
+        script_before = _task_seconds(cdp, "ScriptDuration")
         cdp.send("Page.startScreencast", {"format": "jpeg", "quality": 40, "everyNthFrame": 1})
         page.evaluate(_START_RAF)
         end = time.monotonic() + seconds
@@ -117,22 +120,25 @@ def measure(browser: Browser, url: str, size: int, throttle: float, seconds: flo
         raf = page.evaluate(_STOP_RAF)
         cdp.send("Page.stopScreencast")
         after = _task_seconds(cdp)
+        script_after = _task_seconds(cdp, "ScriptDuration")
         dt = max(raf["dt"], 1.0) / 1000.0
         n = max(int(raf["n"]), 1)
         return Playback(
             fps_raf=raf["n"] / dt,
             fps_changed=max(changed[0] - 1, 0) / dt,
             main_ms=1000.0 * (after - before) / n,
+            script_ms=1000.0 * (script_after - script_before) / n,
             first_frame_ms=first,
             renderer_mb=renderer_rss_mb(browser),
+            state=page.evaluate(state) if state else None,
         )
     finally:
         context.close()
 
 
-def _task_seconds(cdp) -> float:
+def _task_seconds(cdp, metric: str = "TaskDuration") -> float:
     metrics = {m["name"]: m["value"] for m in cdp.send("Performance.getMetrics")["metrics"]}
-    return float(metrics.get("TaskDuration", 0.0))
+    return float(metrics.get(metric, 0.0))
 
 
 def renderer_rss_mb(browser: Browser) -> float:
