@@ -46,9 +46,37 @@ def test_shapes_against_a_best_stop_early_with_the_same_keys():
     for a in freeknots.SHAPES_DEG[1:]:
         full = kf.fewest(full, freeknots.point_keys(x, active, 0.25, (a,)))
     assert (full.mask.sum(axis=0) < first.mask.sum(axis=0)).any()  # the later shapes do win somewhere
-    early = freeknots.point_keys(x, active, 0.25, freeknots.SHAPES_DEG[1:], best=first)
+    early = freeknots.point_keys(x, active, 0.25, freeknots.SHAPES_DEG[1:], best=first, exhaustive=True)
     assert np.array_equal(early.mask, full.mask) and np.array_equal(early.values, full.values)
-    assert np.array_equal(freeknots.point_keys(x, active, 0.25).mask, full.mask)
+    assert np.array_equal(freeknots.point_keys(x, active, 0.25, exhaustive=True).mask, full.mask)
+    guided = freeknots.point_keys(x, active, 0.25)  # each later shape only where the jitter leans its way
+    squares = freeknots.point_keys(x, active, 0.25, freeknots.SHAPES_DEG[:1])  # first holds `early` now
+    assert (guided.mask.sum(axis=0) <= squares.mask.sum(axis=0)).all()
+    assert (guided.mask.sum(axis=0) >= full.mask.sum(axis=0)).all()
+
+
+def test_the_shape_tried_is_the_one_the_jitter_leans_towards():
+    """Jitter along y only: the tall rectangle (60 degrees) needs fewest keys and is the one tried; along x only,
+    the wide one (30 degrees); the same jitter on both axes keeps the square."""
+    rng = np.random.default_rng(3)
+    t, n = 150, 12
+    base = np.cumsum(rng.normal(0, 0.05, (t, n, 6)), axis=0)  # slow drift on both axes
+    jitter = rng.normal(0, 0.4, (t, n, 6))
+    x = base.copy()
+    x[:, :4, 1::2] += jitter[:, :4, 1::2]  # tracks 0-3: y
+    x[:, 4:8, 0::2] += jitter[:, 4:8, 0::2]  # tracks 4-7: x
+    x[:, 8:] += jitter[:, 8:]  # tracks 8-11: both
+    active = np.ones((t, n), bool)
+    lean = freeknots.lean_deg(x, active)
+    assert (lean[:4] > 52.5).all() and (lean[4:8] < 37.5).all() and (np.abs(lean[8:] - 45) < 7.5).all()
+    guided = freeknots.point_keys(x, active, 0.5)
+    full = freeknots.point_keys(x, active, 0.5, exhaustive=True)
+    squares = freeknots.point_keys(x, active, 0.5, freeknots.SHAPES_DEG[:1])
+    g, f, sq = (k.mask.sum(axis=0) for k in (guided, full, squares))
+    assert (g[:8] == f[:8]).all() and (g[:8] < sq[:8]).all()  # the leaning tracks get the best shape
+    assert (g[8:] == sq[8:]).all()  # the others are not tried against the rectangles
+    err = np.linalg.norm((kf.interpolate(guided) - x).reshape(t, n, 3, 2), axis=-1).max()
+    assert within(err, 0.5, x)
 
 
 def test_still_hidden_and_never_active_tracks():
