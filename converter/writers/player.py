@@ -158,7 +158,7 @@ def _head(sheet: Sheet, tris: np.ndarray, local: np.ndarray, xy: np.ndarray,
     det = np.linalg.det(a[:, :, :2])
     if not (np.isfinite(a).all() and (np.abs(det) > 1e-3).all()):
         return None
-    local_xy = np.einsum("tij,tvj->tvi", np.linalg.inv(a[:, :, :2]), xy - a[:, None, :, 2])
+    local_xy = groups.apply_linear(np.linalg.inv(a[:, :, :2]), xy - a[:, None, :, 2])
     gain = float(np.linalg.norm(a[:, :, :2], ord=2, axis=(1, 2)).max())
     radius = (budget.tolerance - budget.float_err) / gain - budget.rounding
     return mats, local_xy, radius
