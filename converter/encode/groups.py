@@ -68,7 +68,8 @@ BAND_SHARE = 0.3  # the same for each band's transform inside the head's (smooth
 HUBER_PX = 1.0  # scale of the robust (Cauchy) weights in the affine fit
 FIT_ITERATIONS = 3
 EVERY_FRAME_SHARE = 0.8  # when keyframing keeps more frames than this share, write every frame (no keyTimes)
-PLAIN_SAMPLE = 4  # the plain key count that decides whether groups pay is estimated on every 4th path
+PLAIN_SAMPLE = 4  # the plain key count that decides whether groups pay is estimated on every 16th path, then
+PLAIN_MARGIN = 0.25  # on every 4th when the first estimate is within this share of the grouped cost
 TIME_DECIMALS = 4  # keyTimes of the transform animations are played (and so written) rounded to these decimals
 
 
@@ -477,12 +478,6 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     def pays(a: int, saved_bytes: float) -> bool:  # wrapping run a..: its band's group, once more
         return bool(ok[a]) and saved_bytes > group_bytes[int(lay.band[a])] + costs.close
 
-    # The plain encoding's key count only decides whether grouping pays: estimated from every PLAIN_SAMPLE-th path.
-    sample = np.arange(0, p, PLAIN_SAMPLE if p >= 50 * PLAIN_SAMPLE else 1)
-    plain = freeknots.point_keys(_tracks(xy, faces, tris[lay.order[sample]]), act[:, sample],
-                                 np.broadcast_to(max(global_radius, 1e-6), (p,))[sample], freeknots.SHAPES_DEG[:1])
-    plain_keys = int(round(plain.mask.sum() * p / len(sample)))
-    del plain
     # A run saves at most its head-local keys: band-local keys are worked out only where that could pay.
     maybe = [(a, b) for a, b in runs if pays(a, kh_n[a:b].sum() * costs.key)]
     kl_n = kh_n.copy()
@@ -505,13 +500,14 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
         out_track[:, w] = local[:, won]
         keys.mask[:, w], keys.values[:, w] = kl.mask[:, won], kl.values[:, won]
         del local, kl
-    stats = {"bands": len(lay.motions), "runs": len(lay.runs) - 1, "groups": len(wrapped_runs),
-             "grouped_paths": int(wrapped.sum()), "keys_global": plain_keys,
-             "max_gain": float(max(lay.gain.max(), lay.head.gain)) if p else 1.0}
     head_bytes = costs.transform(lay.head)
     n_keys = np.where(wrapped, kl_n, kh_n)
     transform_bytes = head_bytes + sum(group_bytes[int(lay.band[a])] for a, _ in wrapped_runs)
     grouped_cost = int(n_keys.sum()) * costs.key + transform_bytes
+    plain_keys = _plain_keys(xy, faces, tris[lay.order], act, global_radius, grouped_cost / costs.key)
+    stats = {"bands": len(lay.motions), "runs": len(lay.runs) - 1, "groups": len(wrapped_runs),
+             "grouped_paths": int(wrapped.sum()), "keys_global": plain_keys,
+             "max_gain": float(max(lay.gain.max(), lay.head.gain)) if p else 1.0}
     if grouped_cost >= plain_keys * costs.key:  # the plain encoding is shorter: no groups
         del keys, out_track
         lay = lay._replace(head_local=None)
@@ -528,6 +524,24 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
         keys = freeknots.point_keys(out_track, act, radius, freeknots.SHAPES_DEG[1:], best=keys)
     return Plan(lay.order, out_track, radius, np.array(wrapped_runs, np.int64).reshape(-1, 2), band, gain,
                 lay.motions, stats, keys, lay.head)
+
+
+def _plain_keys(xy: np.ndarray, faces: np.ndarray, tris: np.ndarray, active: np.ndarray, radius: float,
+                grouped_keys: float) -> int:
+    """The plain encoding's key count for paths tris (global tracks within radius), which only decides whether
+    grouping pays (against grouped_keys, its cost in keys): estimated from every PLAIN_SAMPLE ** 2-th path, then
+    from every PLAIN_SAMPLE-th when that estimate is within PLAIN_MARGIN of grouped_keys."""
+    p = len(tris)
+    keys_n = 0
+    for step in (PLAIN_SAMPLE ** 2, PLAIN_SAMPLE):
+        step = step if p >= 50 * step else 1
+        sample = np.arange(0, p, step)
+        plain = freeknots.point_keys(_tracks(xy, faces, tris[sample]), active[:, sample],
+                                     np.full(len(sample), max(radius, 1e-6)), freeknots.SHAPES_DEG[:1])
+        keys_n = int(round(plain.mask.sum() * p / len(sample)))
+        if step == 1 or abs(keys_n - grouped_keys) > PLAIN_MARGIN * grouped_keys:
+            break
+    return keys_n
 
 
 def _tracks(xy: np.ndarray, faces: np.ndarray, tris: np.ndarray) -> np.ndarray:
