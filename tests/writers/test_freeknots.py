@@ -57,24 +57,33 @@ def test_shapes_against_a_best_stop_early_with_the_same_keys():
 
 def test_the_shape_tried_is_the_one_the_jitter_leans_towards():
     """Jitter along y only: the tall rectangle (60 degrees) needs fewest keys and is the one tried; along x only,
-    the wide one (30 degrees); the same jitter on both axes keeps the square."""
+    the wide one (30 degrees). A track that never bends tries none."""
     rng = np.random.default_rng(3)
-    t, n = 150, 12
+    t, n = 150, 13
     base = np.cumsum(rng.normal(0, 0.05, (t, n, 6)), axis=0)  # slow drift on both axes
     jitter = rng.normal(0, 0.4, (t, n, 6))
     x = base.copy()
     x[:, :4, 1::2] += jitter[:, :4, 1::2]  # tracks 0-3: y
     x[:, 4:8, 0::2] += jitter[:, 4:8, 0::2]  # tracks 4-7: x
-    x[:, 8:] += jitter[:, 8:]  # tracks 8-11: both
+    x[:, 8:12] += jitter[:, 8:12]  # tracks 8-11: both
+    x[:, 12] = 5.0  # track 12: still, no bend
     active = np.ones((t, n), bool)
     lean = freeknots.lean_deg(x, active)
-    assert (lean[:4] > 52.5).all() and (lean[4:8] < 37.5).all() and (np.abs(lean[8:] - 45) < 7.5).all()
-    guided = freeknots.point_keys(x, active, 0.5)
+    assert (lean[:4] > 60).all() and (lean[4:8] < 30).all() and (np.abs(lean[8:12] - 45) < 7.5).all()
+    assert np.isnan(lean[12])
+    calls = []
+    real = freeknots._reduce_block
+    try:
+        freeknots._reduce_block = lambda x, *a, **k: calls.append(x.shape[1]) or real(x, *a, **k)
+        guided = freeknots.point_keys(x, active, 0.5)
+    finally:
+        freeknots._reduce_block = real
+    assert calls == [n, 6, 6]  # the square for all, then each rectangle on its side's 6 bending tracks
     full = freeknots.point_keys(x, active, 0.5, exhaustive=True)
     squares = freeknots.point_keys(x, active, 0.5, freeknots.SHAPES_DEG[:1])
     g, f, sq = (k.mask.sum(axis=0) for k in (guided, full, squares))
     assert (g[:8] == f[:8]).all() and (g[:8] < sq[:8]).all()  # the leaning tracks get the best shape
-    assert (g[8:] == sq[8:]).all()  # the others are not tried against the rectangles
+    assert (g <= sq).all() and g[12] == sq[12]
     err = np.linalg.norm((kf.interpolate(guided) - x).reshape(t, n, 3, 2), axis=-1).max()
     assert within(err, 0.5, x)
 
