@@ -532,14 +532,14 @@ def _plain_keys(xy: np.ndarray, faces: np.ndarray, tris: np.ndarray, active: np.
     grouping pays (against grouped_keys, its cost in keys): estimated from every PLAIN_SAMPLE ** 2-th path, then
     from every PLAIN_SAMPLE-th when that estimate is within PLAIN_MARGIN of grouped_keys."""
     p = len(tris)
+    steps = [s for s in (PLAIN_SAMPLE ** 2, PLAIN_SAMPLE) if p >= 50 * s] or [1]  # >= 50 paths in a sample
     keys_n = 0
-    for step in (PLAIN_SAMPLE ** 2, PLAIN_SAMPLE):
-        step = step if p >= 50 * step else 1
+    for i, step in enumerate(steps):
         sample = np.arange(0, p, step)
         plain = freeknots.point_keys(_tracks(xy, faces, tris[sample]), active[:, sample],
                                      np.full(len(sample), max(radius, 1e-6)), freeknots.SHAPES_DEG[:1])
         keys_n = int(round(plain.mask.sum() * p / len(sample)))
-        if step == 1 or abs(keys_n - grouped_keys) > PLAIN_MARGIN * grouped_keys:
+        if i == len(steps) - 1 or abs(keys_n - grouped_keys) > PLAIN_MARGIN * grouped_keys:
             break
     return keys_n
 
