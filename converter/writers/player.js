@@ -329,13 +329,17 @@ void main() { o = v; }`;
     return gl.getProgramParameter(prog, gl.LINK_STATUS) ? prog : null;
   }
 
-  function webgl2Renderer(cv, anim, antialias) {
-    let gl = null;
+  // A WebGL context of the given type ("webgl2" or "webgl") on canvas cv, or null.
+  function context(cv, type, antialias) {
     try {
-      gl = cv.getContext("webgl2", { antialias, alpha: true, premultipliedAlpha: true, depth: false });
+      return cv.getContext(type, { antialias, alpha: true, premultipliedAlpha: true, depth: false });
     } catch (e) {
-      gl = null;
+      return null;
     }
+  }
+
+  function webgl2Renderer(cv, anim, antialias) {
+    const gl = context(cv, "webgl2", antialias);
     if (!gl) return null;
     const { h, gouraud, pathVertices, xy, rgb, shown } = anim;
     const prog = program(gl, GL2_VS, GL2_FS);
@@ -411,12 +415,7 @@ void main() { o = v; }`;
 
   // draw(positions (x, y px per drawn corner), colours (r, g, b, 255 per corner), corners).
   function webglRenderer(cv, width, height, antialias) {
-    let gl = null;
-    try {
-      gl = cv.getContext("webgl", { antialias, alpha: true, premultipliedAlpha: true, depth: false });
-    } catch (e) {
-      gl = null;
-    }
+    const gl = context(cv, "webgl", antialias);
     if (!gl) return null;
     const vs = "attribute vec2 p;attribute vec4 c;uniform vec2 s;varying vec4 v;" +
       "void main(){gl_Position=vec4(p.x*s.x-1.0,1.0-p.y*s.y,0.0,1.0);v=c;}";
