@@ -245,7 +245,8 @@ def _levers(sheet, anim, data: bytes, raw_n: int) -> list[str]:
         f" {_kb(len(sampled))} (gzip {_kb(_gz(sampled))}) | {_kb(base)} (gzip {_kb(_gz(data))}) |"
         f" {_pct(len(sampled) - base, raw_n)} of raw, gzip {_pct(_gz(sampled) - _gz(data), raw_n)} |",
         f"| per path the rectangle ({', '.join(f'{a:g}' for a in real_shapes)} deg) in the tolerance circle needing"
-        f" fewest keys (a rectangle tried where the path's jitter leans its way) vs the square only | {_kb(len(squares))} (gzip {_kb(_gz(squares))}) | {_kb(base)} |"
+        f" fewest keys (a rectangle tried where the path's jitter leans its way) vs the square only"
+        f" | {_kb(len(squares))} (gzip {_kb(_gz(squares))}) | {_kb(base)} |"
         f" {_pct(len(squares) - base, raw_n)} of raw, gzip {_pct(_gz(squares) - _gz(data), raw_n)} |",
         f"| gzip -9 | {_kb(base)} | {_kb(_gz(data))} | {_pct(base - _gz(data), raw_n)} of raw |",
     ]

@@ -543,7 +543,7 @@ def _raw_block(rgb: np.ndarray, active: np.ndarray, track: np.ndarray, ids: list
 
 
 def _keyed(attribute: str, pk: np.ndarray, p: int, text: list[str], kt_text: list[str], dur: str,
-            animate: np.ndarray, discrete: bool = False) -> tuple[list[str], list[str], int]:
+           animate: np.ndarray, discrete: bool = False) -> tuple[list[str], list[str], int]:
     """Per path an <animate> through its keys, linear or (discrete) each value held until the next key (pk: the
     path of each key, sorted; value and keyTimes texts path-major) where animate[j]."""
     mode = 'calcMode="discrete" ' if discrete else ""
@@ -714,7 +714,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     # A step shows from frame k: placed half a frame early, rounded by at most a quarter frame.
     c_dec = math.ceil(math.log10(2 * max(t, 1)))
     c_anims, _, n_color_keys = _keyed("color", cpk, p, _hex(crow).tolist(), key_times(cfk, t, c_dec, "early"),
-                                       dur, c_vary, discrete=True)
+                                      dur, c_vary, discrete=True)
     n_uniform = len(d_uniform)
     cbounds = np.searchsorted(cpk, np.arange(p + 1))[:-1]
     packed = (crow[:, 0] << 16) | (crow[:, 1] << 8) | crow[:, 2]

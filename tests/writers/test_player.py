@@ -257,7 +257,8 @@ def test_late_frames_drop_multisampling_once_and_the_player_draws_on(browser, ca
             before = page.evaluate_handle("() => document.getElementById('facesvg-canvas')")
             # Two windows of played frames, counted in the page.
             page.evaluate("""() => new Promise((done) => { let n = 0;
-                const tick = () => (++n > 70 ? done() : requestAnimationFrame(tick)); requestAnimationFrame(tick); })""")
+                const tick = () => (++n > 70 ? done() : requestAnimationFrame(tick));
+                requestAnimationFrame(tick); })""")
             assert page.evaluate("() => [facesvgPlayer.renderer, facesvgPlayer.antialias]") == ["webgl2", not dropped]
             assert page.evaluate("(c) => c === document.getElementById('facesvg-canvas')", before) is not dropped
             assert page.locator("canvas").count() == 1
