@@ -32,6 +32,7 @@ from lxml import etree
 
 from converter.camera import Camera
 from converter.convert import load, prepare
+from converter.encode.groups import apply_linear
 from converter.errors import InputError
 from converter.extract import cull
 from converter.options import ConversionOptions, Report
@@ -378,7 +379,7 @@ def evaluate(data: bytes) -> Evaluated:
         own = el.get("transform")
         if own:
             mat = mat @ _parse_transform(own)
-        xy = np.einsum("tij,tnvj->tnvi", mat[:, :2, :2], xy) + mat[:, None, None, :2, 2]
+        xy = apply_linear(mat[:, :2, :2], xy) + mat[:, None, None, :2, 2]
         tris.extend(ids)
         xys.append(xy)
         shown.append(vis[:, None] & ~point)

@@ -431,7 +431,7 @@ def decode(data: bytes) -> Decoded:
     track, fk, vals = _unpack_keys(pc, pf, pv.reshape(-1, 2), t)
     xy = _expand(track, fk, vals.astype(np.float64) / scale, n_v, t + 1)
     if mats is not None:  # local to the head transform: to px
-        xy = np.einsum("tij,tvj->tvi", mats[:, :, :2], xy) + mats[:, None, :, 2]
+        xy = groups.apply_linear(mats[:, :, :2], xy) + mats[:, None, :, 2]
     ctrack, cfk, cvals = _unpack_keys(cc, cf, cv.reshape(-1, 3), t, modulo=256)
     rgb = _expand(ctrack, cfk, cvals.astype(np.float64), n_ct, t + 1)
     vtrack, vfk, _ = _unpack_keys(vc, vf, np.zeros((len(vf), 1), np.int64), t - 1)
