@@ -16,6 +16,10 @@ import numpy as np
 
 QUANT_SHARE = 0.25  # share of the tolerance spent on integer rounding (the rest on keyframes)
 TIME_SHARE = 0.015  # share of the tolerance spent on rounding keyTimes
+# Relative float error per px of extent: a player's float32 arithmetic (2e-7) plus three float32 roundings (2^-24
+# each) of what the encoder stores as float32 to bound its memory: the tracks (groups.Layout.head_local), the key
+# values (freeknots.point_keys) and the values interpolated at a hidden run's edges (collapse.fold).
+FLOAT_ERR_PER_PX = 2e-7 + 3 * 2.0 ** -24
 
 
 def viewbox_scale(tolerance: float) -> int:
@@ -30,7 +34,7 @@ class ErrorBudget(NamedTuple):
     scale: int  # integer units per px of the coordinate grid
     rounding: float  # px: worst rounding of a 2D point to that grid, sqrt(1/2) / scale
     keytimes: float  # px: what rounding keyTimes may move a point
-    float_err: float  # px: float arithmetic of a player on coordinates of this size
+    float_err: float  # px: float arithmetic of a player, and the encoder's float32 tracks, on coordinates this large
     keys: float  # px (Euclidean per point) left for keyframing
 
     @classmethod
@@ -39,7 +43,7 @@ class ErrorBudget(NamedTuple):
         scale = viewbox_scale(tolerance)
         rounding = math.sqrt(0.5) / scale
         keytimes = TIME_SHARE * tolerance
-        float_err = 1e-4 + 2e-7 * extent_px
+        float_err = 1e-4 + FLOAT_ERR_PER_PX * extent_px
         return cls(tolerance, scale, rounding, keytimes, float_err, tolerance - rounding - keytimes - float_err)
 
     @property

@@ -28,7 +28,7 @@ class Timeline(NamedTuple):
 
     path: np.ndarray  # int (K,) path of each key, sorted
     half: np.ndarray  # int (K,) time in half frames, 0..2T, increasing within a path
-    values: np.ndarray  # float64 (K, D) key values
+    values: np.ndarray  # float (K, D) key values, in the keys' dtype (float32 from freeknots.point_keys)
     collapsed: np.ndarray  # bool (K,) the key is a collapse (hides the path)
     snap: np.ndarray  # int8 (K,): -1 round earlier only, +1 later only, 0 nearest, -2 exact (module docstring)
 
@@ -61,7 +61,7 @@ def interpolate_at(keys: Keys, path: np.ndarray, frame: np.ndarray) -> np.ndarra
 
 def _point(v: np.ndarray) -> np.ndarray:
     """Triangle rows (N, 6+) collapsed to their centroid (extra columns kept)."""
-    out = np.array(v, np.float64)
+    out = np.array(v)
     c = v[:, :6].reshape(len(v), 3, 2).mean(axis=1)
     out[:, :6] = np.tile(c, 3)
     return out
@@ -79,12 +79,12 @@ def fold(keys: Keys, active: np.ndarray) -> Timeline:
     after = r1 < t - 1  # visible frame r1 + 1 follows it
     vp = np.concatenate([rp[before], rp[after]])
     vf = np.concatenate([r0[before] - 1, r1[after] + 1])
-    vv = interpolate_at(keys, vp, vf) if len(vp) else np.zeros((0, vals.shape[1]))
+    vv = (interpolate_at(keys, vp, vf) if len(vp) else np.zeros((0, vals.shape[1]))).astype(vals.dtype)
     # Collapsed keys: at the half frames round the run, or the loop's ends.
     c_start = np.where(before, 2 * r0 - 1, 0)
     c_end = np.where(after, 2 * r1 + 1, 2 * t)
     d = vals.shape[1]
-    vb, va = np.zeros((len(rp), d)), np.zeros((len(rp), d))  # the visible values before and after each run
+    vb, va = np.zeros((len(rp), d), vals.dtype), np.zeros((len(rp), d), vals.dtype)  # visible before / after a run
     nb = int(before.sum())
     vb[before], va[after] = vv[:nb], vv[nb:]
     near = np.where(before[:, None], vb, va)  # what the collapse at the run's start shrinks from

@@ -275,7 +275,8 @@ def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
                exhaustive: bool = False) -> keys.Keys:
     """Free-knot keys for tracks of 2D points xy (T, N, 2m), each point within Euclidean radius where active;
     with best, per track whichever of best and the shapes' keys has fewest (best on ties; best's arrays are
-    updated in place and returned).
+    updated in place and returned). The values are stored as float32 (dense over T + 1 frames, they are the
+    encoder's largest array; budget.float_err covers the rounding); each block is reduced in float64.
 
     Without best the first shape is reduced for every track. Unless exhaustive, a track then tries only the
     further shape nearest the lean of its jitter (``lean_deg``; the rectangle on its side of the square), and none
@@ -286,7 +287,7 @@ def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
     m = xy.shape[2] // 2
     r = np.broadcast_to(np.asarray(radius, np.float64), (n,))
     if best is None:
-        best = keys.Keys(np.zeros((t + 1, n), bool), np.zeros((t + 1, n, 2 * m)),
+        best = keys.Keys(np.zeros((t + 1, n), bool), np.zeros((t + 1, n, 2 * m), np.float32),
                          np.where(np.any(active, axis=0), np.argmax(active, axis=0), -1))
         base, shapes = shapes[0], shapes[1:]
     else:

@@ -110,7 +110,7 @@ class Layout(NamedTuple):
     motions: tuple[BandMotion, ...]  # per band
     gain: np.ndarray  # float64 (P,) error gain of each path's band, head transform included
     head: BandMotion  # the head's transform: the outermost group, around every path
-    head_local: np.ndarray  # float64 (T, P, 6) path vertices in the head's local px
+    head_local: np.ndarray  # float32 (T, P, 6) path vertices in the head's local px
 
     def band_local(self, sel: np.ndarray) -> np.ndarray:
         """Paths sel's vertices (T, len(sel), 6) in their band's local px (relative to its centroid), worked out
@@ -129,7 +129,7 @@ class Plan(NamedTuple):
     """What the bounded encoder needs to write paths under rigid groups (see ``plan``)."""
 
     order: np.ndarray  # int (P,) new document order of the input paths
-    track: np.ndarray  # float64 (T, P, 6) px to encode per path: local (in a group) or global (plain)
+    track: np.ndarray  # float32 (T, P, 6) px to encode per path: local (in a group) or global (plain)
     radius: np.ndarray  # float64 (P,) Euclidean px the keyframing of each path may use
     groups: np.ndarray  # int (G, 2) first and one-past-last path (new order) of each run wrapped in its band's group
     band: np.ndarray  # int (P,) band of each path in the new order, -1 when plain (no group)
@@ -406,9 +406,10 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
                        BAND_SHARE * tolerance, scale, kt_decimals)
     order = np.arange(len(tris))
     if merge_runs and len(tris) > 1:
-        order = reorder(band, overlap_pairs(xy64[:, faces[tris]], active, band=band))
+        order = reorder(band, overlap_pairs(xy[:, faces[tris]], active, band=band))  # float32, as it tests
     band = band[order]
-    path_head = in_head[:, faces[tris[order]]]  # (T, P, 3, 2) head frame
+    # Stored as float32: ~1e-5 px at these magnitudes (budget.float_err), half the plan's largest array.
+    path_head = in_head.astype(np.float32)[:, faces[tris[order]]]  # (T, P, 3, 2) head frame
     gains = np.zeros(len(band_ids))
     for b, m in enumerate(motions):
         lin = np.einsum("tij,tjk->tik", head.matrices[:, :, :2], m.matrices[:, :, :2])
@@ -545,8 +546,9 @@ def _plain_keys(xy: np.ndarray, faces: np.ndarray, tris: np.ndarray, active: np.
 
 
 def _tracks(xy: np.ndarray, faces: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """Screen tracks (T, P, 6) px, float64, of the triangles tris."""
-    return np.asarray(xy[:, faces[tris]], np.float64).reshape(xy.shape[0], len(tris), 6)
+    """Screen tracks (T, P, 6) px of the triangles tris, float32 as the Sheet stores them (the free-knot pass
+    works on float64 copies a block of tracks at a time)."""
+    return np.asarray(xy[:, faces[tris]], np.float32).reshape(xy.shape[0], len(tris), 6)
 
 
 def _run_blocks(runs: list[tuple[int, int]], size: int) -> list[list[tuple[int, int]]]:

@@ -33,7 +33,7 @@ class Keys(NamedTuple):
     """Kept keyframes of N tracks over T frames: key mask over frames 0..T and the key values."""
 
     mask: np.ndarray  # bool (T + 1, N): frame k (k = T is the loop end) is a key of track n
-    values: np.ndarray  # float64 (T + 1, N, D): value at each key (undefined where mask is False)
+    values: np.ndarray  # float (T + 1, N, D): value at each key (undefined where not a key); float32 from point_keys
     first_active: np.ndarray  # int (N,): first active frame, -1 when the track is never active
 
 

@@ -205,7 +205,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
     vact = _vertex_active(active, local, n_v)
     budget = ErrorBudget.split(options.tolerance, max(sheet.camera.width, sheet.camera.height))
     pos, mats = _position_keys(sheet, tris, verts, local, vact, budget, options.rigid)
-    q = pos._replace(values=np.rint(pos.values * budget.scale))
+    q = pos._replace(values=np.rint(np.multiply(pos.values, budget.scale, dtype=np.float64)))
     pc, pf, pv = _pack_keys(q.mask, q.values)
     wide = bool(len(pv)) and (pv.min() < -32768 or pv.max() > 32767)
     gouraud = options.shading != "flat"

@@ -51,7 +51,8 @@ STROKE_PX = 0.5  # stroke of the fill colour hides anti-aliasing seams between n
 COLOR_TIME_LEVELS = 0.1  # of which rounding the colour keyTimes may take
 BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime): what groups weigh
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
-RAW_COUNT_VERTICES = 4096  # vertices per block when counting the raw encoding's bytes
+KEY_TEXT_KEYS = 1 << 17  # keys whose d and keyTimes texts exist at once (a block of paths)
+RAW_COUNT_CELLS = 1 << 21  # vertex-frames per block when counting the raw encoding's bytes (~100 MB of temporaries)
 COLOR_ERROR_CELLS = 1 << 18  # frames x paths per block when measuring the colour error for the report
 RAW_WRITE_PATHS = 128  # paths per block when writing it (its one format call holds 18 objects per tri-frame)
 
@@ -236,11 +237,13 @@ def _color_block(levels: np.ndarray, active: np.ndarray, tolerance: float) -> tu
     return mask, np.clip(values, 0, 255).astype(np.uint8)
 
 
-def color_steps(rgb: np.ndarray, active: np.ndarray, tolerance: float) -> keyframes.Keys:
-    """Colour (T, P, 3) in 0..1 as steps for a discrete animation: per path the fewest held colours (integer
-    levels, uint8) within tolerance levels per channel of every shown frame, each held from its first frame (a
-    key; frame 0 always is one, hidden frames take whatever is held). Greedy, which is optimal for a max-norm
-    bound on a piecewise-constant fit. A path with one key is one static colour.
+def color_steps(rgb: np.ndarray, active: np.ndarray, tolerance: float,
+                paths: np.ndarray | None = None) -> keyframes.Keys:
+    """Colour (T, P, 3) in 0..1 (or its columns paths of a wider (T, N, 3)) as steps for a discrete animation:
+    per path the fewest held colours (integer levels, uint8) within tolerance levels per channel of every shown
+    frame, each held from its first frame (a key; frame 0 always is one, hidden frames take whatever is held).
+    Greedy, which is optimal for a max-norm bound on a piecewise-constant fit. A path with one key is one static
+    colour.
 
     Why steps and not linear keys: Chromium re-evaluates an interpolated colour animation far more slowly than a
     discrete one (bench_playback: the sample's exact-colour file played 3x faster with the same values held), and
@@ -262,7 +265,7 @@ def color_steps(rgb: np.ndarray, active: np.ndarray, tolerance: float) -> keyfra
 
     for f in range(t):
         a = active[f]
-        x = np.asarray(rgb[f], np.float64) * 255
+        x = np.asarray(rgb[f] if paths is None else rgb[f, paths], np.float64) * 255
         nlo, nhi = np.minimum(lo, x), np.maximum(hi, x)
         cut = a & ((nhi - nlo).max(axis=1) / 2 + 0.5 > tolerance)  # frame f does not fit the held colour
         if cut.any():
@@ -275,9 +278,11 @@ def color_steps(rgb: np.ndarray, active: np.ndarray, tolerance: float) -> keyfra
     return keyframes.Keys(mask, values, np.where(active.any(axis=0), np.argmax(active, axis=0), -1))
 
 
-def color_error(rgb: np.ndarray, active: np.ndarray, steps: keyframes.Keys) -> np.ndarray:
-    """Per shown (frame, path) the largest channel error in levels of the played colour (color_steps' held
-    values) against the exact shade rgb (T, P, 3) in 0..1, path-block-major; a block of paths at a time."""
+def color_error(rgb: np.ndarray, active: np.ndarray, steps: keyframes.Keys,
+                paths: np.ndarray | None = None) -> np.ndarray:
+    """Per shown (frame, path) the largest channel error in levels (float32) of the played colour (color_steps'
+    held values) against the exact shade rgb (T, P, 3) in 0..1 (or its columns paths), path-block-major; a block
+    of paths at a time."""
     t, p = active.shape
     out = []
     block = max(1, COLOR_ERROR_CELLS // max(t, 1))
@@ -286,9 +291,10 @@ def color_error(rgb: np.ndarray, active: np.ndarray, steps: keyframes.Keys) -> n
         sl = slice(a, a + block)
         held = np.maximum.accumulate(np.where(steps.mask[:t, sl], frame, 0), axis=0)
         played = np.take_along_axis(steps.values[:t, sl], held[..., None], axis=0).astype(np.float64)
-        err = np.abs(np.asarray(rgb[:, sl], np.float64) * 255 - played).max(axis=-1)
-        out.append(err[active[:, sl]])
-    return np.concatenate(out) if out else np.zeros(0)
+        exact = rgb[:, sl] if paths is None else rgb[:, paths[sl]]
+        err = np.abs(np.asarray(exact, np.float64) * 255 - played).max(axis=-1)
+        out.append(err[active[:, sl]].astype(np.float32))
+    return np.concatenate(out) if out else np.zeros(0, np.float32)
 
 
 def _discrete(attribute: str, codes: np.ndarray, names: list[str], kt: list[str], dur: str) -> list[str]:
@@ -329,9 +335,8 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
             tris, active, track = tris[plan.order], active[:, plan.order], plan.track
         else:
             plan = None
-    if plan is None:  # float32 as stored for the raw encodings (a block of paths at a time); float64 where keyed
+    if plan is None:  # float32 as stored (the free-knot pass reduces a float64 copy a block of paths at a time)
         track = sheet.xy[:, sheet.faces[tris]].reshape(t, p, 6)
-        track = track.astype(np.float64) if mode == "bounded" else track
     joined = None
     if mode == "bounded" and options.max_animations is not None and p > options.max_animations:
         joined, tris, active, track, plan = _merge_plan(sheet, tris, active, track, plan, options)
@@ -339,10 +344,11 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
         body = _encode_raw(sheet, tris, active, track, dur, chapter=mode == "chapter")
         scale = 1
     else:
-        tl = _timeline(track, active, budget, plan)
-        if plan is not None:  # its keys live on only in tl: let them go before the colours are worked out
-            plan = plan._replace(keys=None)
-        body, scale, enc = _encode_keyed(sheet, budget, tris, active, track, tl, dur, report, plan,
+        owned = [track, _timeline(track, active, budget, plan)]
+        del track  # _encode_keyed lets the track go once the geometry is written
+        if plan is not None:  # its keys live on only in the timeline, its track in owned
+            plan = plan._replace(keys=None, track=None)
+        body, scale, enc = _encode_keyed(sheet, budget, tris, active, owned, dur, report, plan,
                                          options.color_tolerance, joined)
         extra["encoding"].update(enc)
     head = [_header(sheet, scale), metadata(sheet, options, report, extra, order=tris),
@@ -470,8 +476,9 @@ def raw_values_bytes(xy: np.ndarray, corners: np.ndarray) -> int:
     uses = np.bincount(np.asarray(corners).ravel(), minlength=xy.shape[1])
     verts = np.flatnonzero(uses)
     total = 0
-    for a in range(0, len(verts), RAW_COUNT_VERTICES):
-        v = verts[a:a + RAW_COUNT_VERTICES]
+    block = max(1, RAW_COUNT_CELLS // t)
+    for a in range(0, len(verts), block):
+        v = verts[a:a + block]
         c = np.rint(np.asarray(xy[:, v], np.float64) * 100).astype(np.int64)
         per = (_digits(np.abs(c) // 100) + 3 + (c < 0)).sum(axis=2)  # (T, n): "x.xx" "y.yy" of each vertex
         total += int(((per.sum(axis=0) + per[-1]) * uses[v]).sum())
@@ -659,55 +666,90 @@ def _timeline(track: np.ndarray, active: np.ndarray, budget: ErrorBudget,
     return collapse.fold(keys._replace(values=keys.values[..., :6]), active)
 
 
-def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: np.ndarray, track: np.ndarray,
-                  tl: collapse.Timeline, dur: str, report: Report, plan: groups.Plan | None = None,
+def _d_animations(tl: collapse.Timeline, p: int, t: int, gain: np.ndarray | None, view_scale: int,
+                  time_budget: float, dur: str) -> tuple[list[str], list[str], int, np.ndarray, np.ndarray,
+                                                      np.ndarray, np.ndarray, list[int]]:
+    """The d <animate> of each of p paths from its keys tl (gain (P,): error gain of each path's group, None for
+    none): animations, frame-0 d texts, keys written, moving (P,), static offsets (P, 2), keys (P,), mean key
+    text length (P,) and the [least, most] keyTime decimals. A block of paths at a time (KEY_TEXT_KEYS keys),
+    so that a string per key exists only for one block: on a long capture they would outweigh the output."""
+    bounds = np.searchsorted(tl.path, np.arange(p + 1))
+    counts = np.diff(bounds)
+    anims: list[str] = []
+    firsts: list[str] = []
+    n_keys = 0
+    moving, off, per_key = np.zeros(p, bool), np.zeros((p, 2), np.int64), np.zeros(p)
+    lo, hi = None, None
+    a = 0
+    while a < p:  # whole paths, about KEY_TEXT_KEYS keys a block
+        b = max(a + 1, int(np.searchsorted(bounds, bounds[a] + KEY_TEXT_KEYS, side="right")) - 1)
+        b = min(b, p)
+        ks = slice(bounds[a], bounds[b])
+        pk = tl.path[ks] - a
+        sub = collapse.Timeline(pk, tl.half[ks], tl.values[ks], tl.collapsed[ks], tl.snap[ks])
+        rows = np.rint(np.multiply(sub.values, view_scale, dtype=np.float64)).astype(np.int64)
+        px = (gain[a:b][pk] if gain is not None else 1.0) / view_scale  # local units -> output px
+        kt_text, decimals = timeline_key_times(sub, rows, t, px, time_budget)
+        if len(decimals):
+            lo = min(int(decimals.min()), lo if lo is not None else 99)
+            hi = max(int(decimals.max()), hi if hi is not None else -1)
+        moving[a:b] = _varying(pk, b - a, rows)
+        o = offsets(rows, pk, b - a)
+        o[~moving[a:b]] = 0
+        off[a:b] = o
+        text = _path_strings(rows, o[pk])
+        block_anims, block_firsts, n = _keyed("d", pk, b - a, text, kt_text, dur, moving[a:b])
+        anims += block_anims
+        firsts += block_firsts
+        n_keys += n
+        per_key[a:b] = np.bincount(pk, np.fromiter(map(len, text), np.float64, len(text)), b - a)
+        a = b
+    per_key /= np.maximum(counts, 1)
+    return anims, firsts, n_keys, moving, off, counts, per_key, [] if lo is None else [lo, hi]
+
+
+def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: np.ndarray, owned: list,
+                  dur: str, report: Report, plan: groups.Plan | None = None,
                   color_tolerance: float = 3.0, joined: merge.Merge | None = None) -> tuple[list[str], int, dict]:
-    """The error-bounded integer encoding (module docstring) of the keys tl within budget; plan: rigid groups
-    (local tracks); colours within color_tolerance levels; joined: paths drawn as one element
-    (converter.encode.merge)."""
+    """The error-bounded integer encoding (module docstring) of the paths' tracks (T, P, 6) and their keys
+    (collapse.Timeline) within budget, handed over as owned = [track, timeline] (emptied here, so that each is
+    freed as soon as it is used: on a long capture they are the largest arrays); plan: rigid groups (local
+    tracks); colours within color_tolerance levels; joined: paths drawn as one element (converter.encode.merge)."""
+    track, tl = owned
+    owned.clear()
     t, p = active.shape
     tol = budget.tolerance
     view_scale = budget.scale
     time_budget = budget.keytimes
     radius, bound = _radius(budget, plan)
-    pk = tl.path
-    rows = np.rint(tl.values * view_scale).astype(np.int64)
-    gain = plan.gain[pk] if plan is not None else 1.0  # local px -> output px
-    kt_text, decimals = timeline_key_times(tl, rows, t, gain / view_scale, time_budget)
+    geo = _d_animations(tl, p, t, plan.gain if plan is not None else None, view_scale, time_budget, dur)
+    del tl
+    d_anims, d_first, n_keys, moving, off, key_counts, per_key, decimals = geo
     color_tol = color_tolerance
     enc = {"scale": view_scale, "tolerance": tol, "fit_px": round(float(np.min(radius)), 6),
-           "color_levels": color_tol, "hidden": "collapsed",
-           "keytime_decimals": [int(decimals.min()), int(decimals.max())] if len(decimals) else []}
+           "color_levels": color_tol, "hidden": "collapsed", "keytime_decimals": decimals}
     starts = np.arange(p + 1) if joined is None else joined.starts
     sets = [(a, b) for a, b in zip(starts[:-1].tolist(), starts[1:].tolist()) if b - a > 1]
     inside = np.concatenate([np.arange(a, b) for a, b in sets]) if sets else np.zeros(0, np.int64)  # merged
-    # Geometry.
-    moving = _varying(pk, p, rows)
-    off = offsets(rows, pk, p)
-    off[~moving] = 0
-    text = _path_strings(rows, off[pk])
-    d_anims, d_first, n_keys = _keyed("d", pk, p, text, kt_text, dur, moving)
-    counts = np.bincount(pk, minlength=p)
     d_len = np.array([len(a) for a in d_anims])
     d_len[~active.all(axis=0)] = 0  # evenly spaced keys cannot collapse a hidden triangle
     d_len[inside] = 0  # a merged path's d is keyed for all its triangles together (_merged_geometry)
-    per_key = np.bincount(pk, np.fromiter(map(len, text), np.float64, len(text)), p) / np.maximum(counts, 1)
-    d_uniform = _uniform_instead("d", track, active, counts, d_len, per_key, view_scale,
+    d_uniform = _uniform_instead("d", track, active, key_counts, d_len, per_key, view_scale,
                                  bound, True, lambda v, j: _path_strings(v, np.broadcast_to(off[j], (len(v), 2))),
                                  dur, d_anims)
     for j in [j for j in d_uniform if active[0, j]]:  # the static d holds frame 0 as played where it is shown
         d_first[j] = _path_strings(d_uniform[j][:1], off[j:j + 1])[0]
-    # Colour: held steps within the colour tolerance (color_steps); the first step's colour is the path's class.
-    rgb = sheet.face_rgb[:, tris]  # float32 as stored; each use takes float64 levels a block at a time
-    ckeys = color_steps(rgb, active, color_tol)
-    if sets:  # a merged path's one static colour (its code's), and its d keyed for all its triangles together
-        levels = joined.levels
-        ckeys.mask[:, inside] = False
-        ckeys.mask[0, inside] = True
-        ckeys.values[0, inside] = levels[inside]
+    if sets:  # a merged path's d is keyed for all its triangles together
         m_radius = np.broadcast_to(np.asarray(radius, np.float64), (p,))
         m_gain = plan.gain if plan is not None else np.ones(p)
         m_anims, m_first, m_keys = _merged_geometry(track, active, m_radius, m_gain, sets, budget, dur)
+    del track
+    # Colour: held steps within the colour tolerance (color_steps); the first step's colour is the path's class.
+    ckeys = color_steps(sheet.face_rgb, active, color_tol, tris)  # as stored: no (T, P, 3) copy
+    if sets:  # a merged path's one static colour (its code's)
+        ckeys.mask[:, inside] = False
+        ckeys.mask[0, inside] = True
+        ckeys.values[0, inside] = joined.levels[inside]
     cpk, cfk = np.nonzero(ckeys.mask.T)
     crow = ckeys.values.transpose(1, 0, 2)[cpk, cfk].astype(np.int64)
     c_vary = _varying(cpk, p, crow)
@@ -754,7 +796,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
         if b - 1 in closes:
             out.append(CLOSE)
     if sets:  # the merged paths' own keys replace their triangles' single ones in the counts
-        inside_keys = int(np.isin(pk, inside).sum())
+        inside_keys = int(key_counts[inside].sum())
         n_keys += m_keys - inside_keys
         kept = np.ones(p, bool)
         kept[inside] = False
@@ -770,9 +812,9 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     report.counts["palette"] = len(palette)
     report.counts["color_animations"] = int(sum(1 for a in c_anims if a))
     report.counts["animated_paths"] = int(sum(1 for a in d_anims if a))
-    err = color_error(rgb, active, ckeys)
+    err = color_error(sheet.face_rgb, active, ckeys, tris)
     report.figures["color_error_max_levels"] = float(err.max(initial=0.0))
-    report.figures["color_error_p99_levels"] = float(np.percentile(err, 99)) if err.size else 0.0
+    report.figures["color_error_p99_levels"] = float(np.percentile(err, 99, overwrite_input=True)) if err.size else 0.0
     report.figures["keys_per_path"] = n_keys / max(p, 1)
     if plan is not None:
         report.counts.update({f"rigid_{k}": int(v) for k, v in plan.stats.items() if k != "max_gain"})

@@ -34,7 +34,7 @@ def test_hidden_frames_collapse_and_visible_frames_play_as_before(seed):
     keys = freeknots.point_keys(track, active, 0.3)
     tl = collapse.fold(keys, active)
     played, before = _play(tl, p, t), interpolate(keys)
-    np.testing.assert_allclose(played[active], before[active], atol=1e-9)
+    np.testing.assert_allclose(played[active], before[active], atol=1e-5)  # keys and edge values are float32
     tri = played.reshape(t, p, 3, 2)
     point = (tri == tri[:, :, :1]).all(axis=(2, 3))
     assert (point == ~active).all()

@@ -169,7 +169,7 @@ def test_colour_steps_hold_within_tolerance_with_the_fewest_steps():
         assert steps.mask[:, j].sum() == _fewest_steps(rgb[:, j].astype(np.float64) * 255, active[:, j], 3.0)
     # The report's colour error is the played one, exactly, whatever the block of paths.
     report_err = svg_anim.color_error(rgb, active, steps)
-    assert np.array_equal(np.sort(report_err), np.sort(err.T[active.T]))
+    assert np.array_equal(np.sort(report_err), np.sort(err.T[active.T].astype(np.float32)))  # reported as float32
 
 
 def test_colour_error_in_blocks_is_the_error_in_one(monkeypatch):
@@ -181,6 +181,19 @@ def test_colour_error_in_blocks_is_the_error_in_one(monkeypatch):
     monkeypatch.setattr(svg_anim, "COLOR_ERROR_CELLS", 60)  # two paths a block
     blocks = svg_anim.color_error(rgb, active, steps)  # same errors; their order follows the blocks
     assert np.array_equal(np.sort(blocks), np.sort(whole)) and len(whole) == active.sum() and whole.max() <= 3.0
+
+
+def test_colour_steps_and_errors_read_columns_of_the_sheet_without_a_copy():
+    rng = np.random.default_rng(4)
+    wide = rng.random((30, 14, 3)).astype(np.float32)  # the Sheet's face colours; the paths are some of its faces
+    paths = np.array([9, 2, 13, 5, 0, 7])
+    active = rng.random((30, 6)) > 0.3
+    copy = svg_anim.color_steps(wide[:, paths], active, 3.0)
+    steps = svg_anim.color_steps(wide, active, 3.0, paths)
+    assert np.array_equal(steps.mask, copy.mask) and np.array_equal(steps.values, copy.values)
+    assert steps.mask.sum() > 6 * 3  # random shades: many steps, so the comparison means something
+    assert np.array_equal(svg_anim.color_error(wide, active, steps, paths),
+                          svg_anim.color_error(wide[:, paths], active, copy))
 
 
 def test_svg_colours_are_discrete_steps_that_play_within_the_tolerance():
@@ -233,6 +246,17 @@ def test_deterministic_and_svgz():
     assert z.report.sizes["svg"] == len(gzip.decompress(z.data)) and z.report.sizes["output"] == len(z.data)
 
 
+def test_key_texts_written_a_block_of_paths_at_a_time_are_the_same_file(monkeypatch):
+    anim = half_moving()
+    for opts in (ConversionOptions(size=96, occlusion=False), ConversionOptions(size=96, occlusion=False,
+                                                                                max_animations=4)):
+        one = convert_animation(anim, opts)
+        monkeypatch.setattr(svg_anim, "KEY_TEXT_KEYS", 5)  # a path or two a block, some paths alone over it
+        blocks = convert_animation(anim, opts)
+        monkeypatch.undo()
+        assert blocks.data == one.data and one.report.counts["keys"] > 5  # more than one block
+
+
 def test_still_frame_is_static_and_exact_to_grid():
     anim = half_moving()
     data = convert_animation(anim, ConversionOptions(size=96, frame=7, occlusion=False)).data
@@ -251,7 +275,7 @@ def test_raw_size_is_counted_exactly_without_writing(monkeypatch):
     xy = rng.uniform(-150, 1500, (9, 14, 2))
     tracks = [xy[:, c].reshape(9, 6) for c in corners]
     per_path = [";".join(svg_anim._raw_strings(tr) + svg_anim._raw_strings(tr[-1:])) for tr in tracks]
-    monkeypatch.setattr(svg_anim, "RAW_COUNT_VERTICES", 4)
+    monkeypatch.setattr(svg_anim, "RAW_COUNT_CELLS", 4 * 9)  # 9 frames: blocks of 4 vertices
     assert svg_anim.raw_values_bytes(xy, corners) == sum(len(v) for v in per_path)
 
 
