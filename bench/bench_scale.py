@@ -15,6 +15,7 @@ FACESVG_BENCH_QUICK=1 runs only up to 1,000 frames and 32k triangles (the big ca
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import resource
@@ -30,7 +31,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from bench.capture_like import FRAMES, capture_like
-from converter.animation import FaceAnimation
+from converter.animation import FaceAnimation, Part
 from converter.convert import convert_animation, extract_sheet
 from converter.options import ConversionOptions, Report
 from converter.outputs import output_kind
@@ -73,6 +74,42 @@ def face(frames: int, triangles: int, subdivisions: int) -> FaceAnimation:
     return subdivided(capture_like(n_frames=frames, triangles=triangles), subdivisions)
 
 
+FACE_CACHE = ROOT / "bench" / "out" / "faces"
+
+
+def face_file(frames: int, triangles: int, subdivisions: int) -> Path:
+    """The benchmark face saved once, by a process of its own (keyed by the generators' source), so that a
+    measured child loads it as the CLI loads a file instead of also holding the generator's heap (the ICT head
+    and its morph targets, its float64 intermediates) in its peak RSS."""
+    src = b"".join((ROOT / "bench" / n).read_bytes() for n in ("capture_like.py", "faces.py", "bench_scale.py"))
+    path = FACE_CACHE / f"face_{frames}_{triangles}_{subdivisions}_{hashlib.sha1(src).hexdigest()[:10]}.npz"
+    if not path.exists():
+        subprocess.run([sys.executable, str(Path(__file__).resolve()), "face", str(frames), str(triangles),
+                        str(subdivisions), str(path)], cwd=ROOT, check=True)
+    return path
+
+
+def save_face(frames: int, triangles: int, subdivisions: int, path: Path) -> None:
+    """Generate one benchmark face and write it to path (atomically)."""
+    anim = face(frames, triangles, subdivisions)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".part")
+    with open(tmp, "wb") as f:
+        np.savez(f, frames=anim.frames, faces=anim.faces, part_ids=anim.part_ids, fps=anim.fps,
+                 meta=json.dumps({"name": anim.name, "parts": [[p.name, list(p.color), p.label] for p in anim.parts],
+                                  "extras": anim.extras}))
+    os.replace(tmp, path)
+
+
+def load_face(path: Path) -> FaceAnimation:
+    """A face saved by save_face."""
+    with np.load(path) as z:
+        meta = json.loads(str(z["meta"]))
+        parts = tuple(Part(n, tuple(c), label) for n, c, label in meta["parts"])
+        return FaceAnimation(z["frames"], z["faces"], z["part_ids"], parts, float(z["fps"]), meta["name"],
+                             extras=meta["extras"])
+
+
 def naive_svg(sheet, sink, block: int = 256) -> int:
     """The naive animated SVG of a Sheet into sink(bytes): per kept triangle one path whose d holds every frame's
     coordinates with 2 decimals (frame 0's fill); returns the bytes written."""
@@ -98,9 +135,9 @@ def naive_svg(sheet, sink, block: int = 256) -> int:
 
 
 def child(frames: int, triangles: int, subdivisions: int, mode: str) -> dict:
-    """Run in the child process: build the face, convert it (mode 'bounded', 'raw', or 'naive': the same
-    extraction and naive_svg), report CPU (user+sys) and peak RSS."""
-    anim = face(frames, triangles, subdivisions)
+    """Run in the child process: load the face (face_file), convert it (mode 'bounded', 'raw', or 'naive': the
+    same extraction and naive_svg), report CPU (user+sys) and peak RSS."""
+    anim = load_face(face_file(frames, triangles, subdivisions))
     before_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     if mode == "naive":
         c = time.process_time()
@@ -131,7 +168,8 @@ def child(frames: int, triangles: int, subdivisions: int, mode: str) -> dict:
 
 
 def measure(frames: int, triangles: int, subdivisions: int, mode: str) -> dict:
-    """child(...) in a fresh interpreter."""
+    """child(...) in a fresh interpreter (the face is generated first, in a process of its own)."""
+    face_file(frames, triangles, subdivisions)
     cmd = [sys.executable, str(Path(__file__).resolve()), "child", str(frames), str(triangles), str(subdivisions),
            mode]
     env = dict(os.environ, PYOPENGL_PLATFORM=os.environ.get("PYOPENGL_PLATFORM", "egl"))
@@ -211,5 +249,7 @@ if __name__ == "__main__":
         os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
         f, t, s, mode = int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]
         print(json.dumps(child(f, t, s, mode)))
+    elif len(sys.argv) > 1 and sys.argv[1] == "face":
+        save_face(int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), Path(sys.argv[5]))
     else:
         print(run())

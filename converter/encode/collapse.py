@@ -22,6 +22,8 @@ import numpy as np
 
 from converter.encode.keys import Keys
 
+FOLD_CELLS = 1 << 22  # path-frames folded at a time
+
 
 class Timeline(NamedTuple):
     """Keys of P paths in path-major order, times in half frames."""
@@ -68,7 +70,22 @@ def _point(v: np.ndarray) -> np.ndarray:
 
 
 def fold(keys: Keys, active: np.ndarray) -> Timeline:
-    """The keys with every inactive frame of each path hidden by collapsed keys (module docstring)."""
+    """The keys with every inactive frame of each path hidden by collapsed keys (module docstring), a block of
+    FOLD_CELLS path-frames at a time (paths are independent): its temporaries stay small on a long capture."""
+    t, p = active.shape
+    block = max(1, FOLD_CELLS // max(t, 1))
+    if p <= block:
+        return _fold(keys, active)
+    parts = []
+    for a in range(0, p, block):
+        sl = slice(a, a + block)
+        part = _fold(Keys(keys.mask[:, sl], keys.values[:, sl], keys.first_active[sl]), active[:, sl])
+        parts.append(part._replace(path=part.path + a))
+    return Timeline(*(np.concatenate(field) for field in zip(*parts)))
+
+
+def _fold(keys: Keys, active: np.ndarray) -> Timeline:
+    """fold of one block of paths."""
     t, p = active.shape
     pk, fk = np.nonzero(keys.mask.T)
     vals = keys.values.transpose(1, 0, 2)[pk, fk]

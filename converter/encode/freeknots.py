@@ -29,7 +29,8 @@ BIG = 1e7  # bound of the unconstrained first value and of every velocity (px, p
 MAX_VERTS = 40  # polygon capacity; a segment whose polygon would outgrow it is cut early (still valid)
 ON_LINE = 1e-10  # relative distance below which a polygon vertex counts as on a cutting line
 SHAPES_DEG = (45.0, 30.0, 60.0)  # per path, the rectangle in each vertex's tolerance circle that needs fewest keys
-BLOCK_TRACKS = 1024  # tracks reduced together (bounds the scaled copy and the per-shape keys)
+BLOCK_TRACKS = 1024  # at most this many tracks reduced together (bounds the scaled copy and the per-shape keys)
+BLOCK_CELLS = 1 << 18  # ... and at most about this many track-frames: a long capture takes fewer tracks a block
 SLACK = 1e-8  # the bound holds to eps + SLACK (eps + |x| + 1); tracks the final check rejects get sampled keys
 
 
@@ -227,15 +228,22 @@ def _reduce(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
                     bad[j] = True
 
 
+def block_tracks(t: int) -> int:
+    """Tracks of t frames reduced together: BLOCK_TRACKS, fewer on long captures (their float64 copies, keys and
+    jitter would otherwise take hundreds of MB a block)."""
+    return min(BLOCK_TRACKS, max(16, BLOCK_CELLS // max(t, 1)))
+
+
 def reduce_free(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray) -> keys.Keys:
     """Keys for tracks x (T, N, D) within eps per coordinate where active, with free key values."""
     t, n, d = x.shape
     out = keys.Keys(np.zeros((t + 1, n), bool), np.zeros((t + 1, n, d)),
                     np.where(np.any(active, axis=0), np.argmax(active, axis=0), -1))
-    for a in range(0, n, BLOCK_TRACKS):
-        k, _ = _reduce_block(x[:, a:a + BLOCK_TRACKS], active[:, a:a + BLOCK_TRACKS],
-                             np.broadcast_to(np.asarray(eps, np.float64), (n,))[a:a + BLOCK_TRACKS], None)
-        out.mask[:, a:a + BLOCK_TRACKS], out.values[:, a:a + BLOCK_TRACKS] = k.mask, k.values
+    size = block_tracks(t)
+    for a in range(0, n, size):
+        k, _ = _reduce_block(x[:, a:a + size], active[:, a:a + size],
+                             np.broadcast_to(np.asarray(eps, np.float64), (n,))[a:a + size], None)
+        out.mask[:, a:a + size], out.values[:, a:a + size] = k.mask, k.values
     return out
 
 
@@ -293,8 +301,9 @@ def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
     else:
         base = None
     angles = np.array(shapes, np.float64)
-    for b in range(0, n, BLOCK_TRACKS):  # blocks of tracks: the scaled copy, the keys and the lean stay small
-        sl = slice(b, b + BLOCK_TRACKS)
+    size = block_tracks(t)
+    for b in range(0, n, size):  # blocks of tracks: the scaled copy, the keys and the lean stay small
+        sl = slice(b, b + size)
         if base is not None:
             k, _ = _reduce_block(xy[:, sl], active[:, sl], r[sl], None, _scale(base, m))
             best.mask[:, sl], best.values[:, sl] = k.mask, k.values
@@ -305,7 +314,7 @@ def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
                                                                           axis=1)])
         for a in shapes:
             # A shape only replaces best where it needs fewer keys: tracks stop as soon as they cannot.
-            idx = np.arange(b, min(b + BLOCK_TRACKS, n)) if nearest is None else b + np.flatnonzero(nearest == a)
+            idx = np.arange(b, min(b + size, n)) if nearest is None else b + np.flatnonzero(nearest == a)
             if not len(idx):
                 continue
             limit = best.mask[:, idx].sum(axis=0)

@@ -484,7 +484,7 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     kl_n = kh_n.copy()
     wrapped_runs = []
     wrapped = np.zeros(p, bool)
-    for block in _run_blocks(maybe, freeknots.BLOCK_TRACKS):
+    for block in _run_blocks(maybe, freeknots.block_tracks(t)):
         cand = np.concatenate([np.arange(a, b) for a, b in block])
         local = lay.band_local(cand)
         kl = keys_of(local, r_local, cand)

@@ -52,7 +52,7 @@ COLOR_TIME_LEVELS = 0.1  # of which rounding the colour keyTimes may take
 BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime): what groups weigh
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
 KEY_TEXT_KEYS = 1 << 17  # keys whose d and keyTimes texts exist at once (a block of paths)
-RAW_COUNT_CELLS = 1 << 21  # vertex-frames per block when counting the raw encoding's bytes (~100 MB of temporaries)
+RAW_COUNT_CELLS = 1 << 19  # vertex-frames per block when counting the raw encoding's bytes (~40 MB of temporaries)
 COLOR_ERROR_CELLS = 1 << 18  # frames x paths per block when measuring the colour error for the report
 RAW_WRITE_PATHS = 128  # paths per block when writing it (its one format call holds 18 objects per tri-frame)
 
@@ -198,8 +198,9 @@ def color_keys(rgb: np.ndarray, active: np.ndarray, tolerance: float) -> keyfram
     t, p = active.shape
     mask = np.zeros((t + 1, p), bool)
     values = np.zeros((t + 1, p, 3), np.uint8)
-    for a in range(0, p, freeknots.BLOCK_TRACKS):
-        sl = slice(a, a + freeknots.BLOCK_TRACKS)
+    size = freeknots.block_tracks(t)
+    for a in range(0, p, size):
+        sl = slice(a, a + size)
         mask[:, sl], values[:, sl] = _color_block(np.asarray(rgb[:, sl], np.float64) * 255, active[:, sl], tolerance)
     return keyframes.Keys(mask, values, np.where(active.any(axis=0), np.argmax(active, axis=0), -1))
 

@@ -23,7 +23,7 @@ def _play(tl: collapse.Timeline, p: int, t: int) -> np.ndarray:
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_hidden_frames_collapse_and_visible_frames_play_as_before(seed):
+def test_hidden_frames_collapse_and_visible_frames_play_as_before(seed, monkeypatch):
     rng = np.random.default_rng(seed)
     t, p = 40, 30
     track = np.cumsum(rng.normal(0, 0.6, (t, p, 6)), axis=0) + rng.uniform(0, 50, (1, p, 6))
@@ -42,6 +42,9 @@ def test_hidden_frames_collapse_and_visible_frames_play_as_before(seed):
     # Collapses sit on half frames (or the loop's ends); an always-shown path is unchanged.
     assert ((tl.half[tl.collapsed] % 2 == 1) | np.isin(tl.half[tl.collapsed], [0, 2 * t])).all()
     assert tl.collapsed[tl.path == 0].sum() == 0 and (tl.path == 0).sum() == keys.mask[:, 0].sum()
+    monkeypatch.setattr(collapse, "FOLD_CELLS", 3 * t)  # blocks of three paths: the same timeline
+    blocks = collapse.fold(keys, active)
+    assert all(np.array_equal(x, y) for x, y in zip(blocks, tl)) and len(blocks.path) == len(tl.path)
 
 
 def test_keytimes_keep_edges_on_their_side():
