@@ -83,6 +83,7 @@ def extract_sheet(anim: FaceAnimation, options: ConversionOptions, report: Repor
     sheet = extraction.extract(
         anim, camera, neutral=options.neutral_frame, occlusion=options.occlusion, progress=progress,
         occlusion_frames=None if options.frame is None else (options.frame,),  # a still: only its frame counts
+        vertex_colors=options.shading != "flat",  # only Gouraud outputs read them
     )
     if not sheet.kept.any():
         raise InputError("no triangle is ever visible from this camera (all face away or lie outside the view); "

@@ -59,8 +59,12 @@ def extract(
     lighting: Lighting = DEFAULT_LIGHTING,
     progress: Progress = no_progress,
     occlusion_frames: tuple[int, ...] | None = None,
+    vertex_colors: bool = True,
 ) -> Sheet:
     """Project every frame, cull, find never-seen triangles, shade, order: the Sheet writers read.
+
+    vertex_colors=False leaves the per-vertex (Gouraud) colours out (Sheet.vertex_rgb None): flat outputs never
+    read them, and on a long capture they are (T, V, 3) float32.
 
     occlusion_frames: the frames whose id renders decide which triangles are ever seen (default: all; a still
     needs only its own frame)."""
@@ -81,11 +85,14 @@ def extract(
     else:
         kept = visible.any(axis=0)
     progress("shade", 0.75)
-    face_rgb, vertex_rgb = np.empty((t, f, 3), np.float32), np.empty((t, v, 3), np.float32)
+    vertex_colors = vertex_colors or bool(reference_frames)  # the reference renders are Gouraud-shaded
+    face_rgb = np.empty((t, f, 3), np.float32)
+    vertex_rgb = np.empty((t, v, 3), np.float32) if vertex_colors else None
     tri_rgb, vert_base = anim.triangle_colors()[None], anim.face_base_colors()[None]
     for blk in _blocks(t):
         face_rgb[blk] = lambert(face_normals(frames[blk], faces), tri_rgb, camera.view, lighting)
-        vertex_rgb[blk] = lambert(vertex_normals(frames[blk], faces), vert_base, camera.view, lighting)
+        if vertex_rgb is not None:
+            vertex_rgb[blk] = lambert(vertex_normals(frames[blk], faces), vert_base, camera.view, lighting)
     _, neutral_z, _ = camera.project(frames[neutral:neutral + 1])  # float64: the order must not see rounding
     order = painter_order(neutral_z, faces, np.flatnonzero(kept), 0)
     refs = {}

@@ -76,12 +76,16 @@ def fold(keys: Keys, active: np.ndarray) -> Timeline:
     block = max(1, FOLD_CELLS // max(t, 1))
     if p <= block:
         return _fold(keys, active)
-    parts = []
+    fields: list[list[np.ndarray]] = [[] for _ in Timeline._fields]
     for a in range(0, p, block):
         sl = slice(a, a + block)
         part = _fold(Keys(keys.mask[:, sl], keys.values[:, sl], keys.first_active[sl]), active[:, sl])
-        parts.append(part._replace(path=part.path + a))
-    return Timeline(*(np.concatenate(field) for field in zip(*parts)))
+        for out, x in zip(fields, part._replace(path=part.path + a)):
+            out.append(x)
+    joined = []
+    while fields:  # one field at a time, its blocks let go as it is joined
+        joined.append(np.concatenate(fields.pop(0)))
+    return Timeline(*joined)
 
 
 def _fold(keys: Keys, active: np.ndarray) -> Timeline:

@@ -400,16 +400,18 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
     head = _motion(xy64, np.unique(faces[merged == ids[np.argmax(sizes)]]), neutral, HEAD_SHARE * tolerance,
                    scale, kt_decimals)
     in_head = local_tracks(xy64[:, :, None, :], head.matrices)[:, :, 0]  # head frame px, about its centroid
+    del xy64  # the rest works in the head's frame (and the overlap test on the float32 xy)
     band_of_tri = motion_clusters(merged, faces, in_head, neutral, head_clusters)
     band_ids, band = np.unique(band_of_tri[tris], return_inverse=True)
     motions = _motions(in_head, [np.unique(faces[band_of_tri == b]) for b in band_ids.tolist()], neutral,
                        BAND_SHARE * tolerance, scale, kt_decimals)
     order = np.arange(len(tris))
     if merge_runs and len(tris) > 1:
-        order = reorder(band, overlap_pairs(xy[:, faces[tris]], active, band=band))  # float32, as it tests
+        order = reorder(band, overlap_pairs(xy, active, band=band, corners=faces[tris]))
     band = band[order]
     # Stored as float32: ~1e-5 px at these magnitudes (budget.float_err), half the plan's largest array.
-    path_head = in_head.astype(np.float32)[:, faces[tris[order]]]  # (T, P, 3, 2) head frame
+    in_head = in_head.astype(np.float32)
+    path_head = in_head[:, faces[tris[order]]]  # (T, P, 3, 2) head frame
     gains = np.zeros(len(band_ids))
     for b, m in enumerate(motions):
         lin = np.einsum("tij,tjk->tik", head.matrices[:, :, :2], m.matrices[:, :, :2])

@@ -133,8 +133,11 @@ def _candidates(key, owner, c0, band, lo, hi, out) -> int:
 
 
 def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP_BLOCK,
-                  margin: float = STROKE_MARGIN_PX, band: np.ndarray | None = None) -> np.ndarray:
+                  margin: float = STROKE_MARGIN_PX, band: np.ndarray | None = None,
+                  corners: np.ndarray | None = None) -> np.ndarray:
     """(E, 2) path pairs i < j that may come within margin px of each other in a frame where both are drawn.
+    xy_paths (T, P, 3, 2) px, or with corners (P, 3) vertex ids into xy_paths (T, V, 2), gathered a block of
+    frames at a time (no (T, P, 3, 2) copy).
 
     Candidates: per block of frames, pairs whose bounding boxes over the block's drawn frames (grown by
     margin / 2, the stroke's spill) meet, found through a uniform grid. Each candidate is then tested in the
@@ -144,7 +147,7 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP
     (converter.encode.order). With band (P,), only pairs of different bands are returned (``reorder`` keeps each
     band's own order anyway). On the capture-like face this exact test halves the runs the box test alone leaves."""
     t, p = active.shape
-    xy32 = np.asarray(xy_paths, np.float32)
+    xy32 = xy_paths if corners is not None else np.asarray(xy_paths, np.float32)
     m32 = np.float32(margin)
     seen = np.zeros(p * p, bool) if p * p <= PAIR_BITMAP_MAX else None  # dedupe by scatter, not by sorting
     found = []
@@ -153,7 +156,10 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP
         idx = np.flatnonzero(act.any(axis=0))
         if len(idx) < 2:
             continue
-        pts = xy32[k0:k0 + block, idx]  # (B, n, 3, 2)
+        if corners is None:
+            pts = xy32[k0:k0 + block, idx]  # (B, n, 3, 2)
+        else:
+            pts = np.asarray(xy32[k0:k0 + block][:, corners[idx]], np.float32)
         on = act[:, idx]
         lo = np.where(on[:, :, None], pts.min(axis=2), np.inf).min(axis=0) - margin / 2  # corners first: 3x less
         hi = np.where(on[:, :, None], pts.max(axis=2), -np.inf).max(axis=0) + margin / 2  # to mask

@@ -9,9 +9,9 @@ import pytest
 from converter import formats, render
 from converter.animation import vertex_normals
 from converter.camera import Camera
-from converter.convert import convert
+from converter.convert import convert, extract_sheet
 from converter.lighting import lambert
-from converter.options import ConversionOptions
+from converter.options import ConversionOptions, Report
 from svgrender import chromium_frame, iou
 
 
@@ -77,3 +77,11 @@ def sample_path_gltfpack():
     from conftest import ROOT
 
     return ROOT / "samples" / "face_gltfpack.glb"
+
+
+def test_per_vertex_colours_are_worked_out_only_for_gouraud_outputs(sample_path):
+    anim = formats.load(sample_path).sliced(0, 6)
+    flat = extract_sheet(anim, ConversionOptions(size=64), Report())
+    smooth = extract_sheet(anim, ConversionOptions(size=64, shading="gouraud"), Report())
+    assert flat.vertex_rgb is None and smooth.vertex_rgb.shape == (6, anim.n_vertices, 3)
+    assert np.array_equal(flat.face_rgb, smooth.face_rgb) and np.array_equal(flat.xy, smooth.xy)

@@ -198,6 +198,11 @@ def test_overlap_pairs_match_every_pair_tested_by_brute_force(monkeypatch, bitma
             if (near & ~overlap.apart(xy[:, i], xy[:, j], 0.5)).any():
                 want.add((i, j))
     assert len(want) > 20 and got == want
+    # The same paths given as vertex ids into a shared (T, V, 2) array (the planner's form): the same pairs.
+    verts = xy.reshape(t, p * 3, 2)
+    corners = np.arange(p * 3).reshape(p, 3)
+    shared = overlap.overlap_pairs(verts, active, block=8, margin=0.5, band=band, corners=corners)
+    assert {tuple(e) for e in shared.tolist()} == want
 
 
 def test_plan_in_blocks_of_runs_is_the_plan_in_one(sheet, monkeypatch):
