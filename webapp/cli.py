@@ -14,6 +14,7 @@ from webapp.lease import InstanceBusy
 from webapp.warmup import warm_converter
 
 FORM_SLACK = 1 << 20  # room for the option fields and multipart framing beside the largest upload
+RQ_MAINTENANCE_SECONDS = 30  # how often an RQ worker cleans up jobs abandoned by a dead worker (RQ: 600)
 
 
 def register_cli(subparsers) -> None:
@@ -80,5 +81,8 @@ def cmd_worker(args: argparse.Namespace) -> int:
     render._pyrender()
     warm_converter()  # JIT kernels compiled here are inherited by every work horse (no GL context is made)
     conn = Redis.from_url(args.queue)
-    Worker([Queue("facesvg", connection=conn)], connection=conn).work(burst=args.burst)
+    # RQ's maintenance (every 10 minutes by default) is what fails a job whose worker died after taking it from
+    # the queue but before its horse claimed it; the server then records it (RQQueue.get). Run it often.
+    Worker([Queue("facesvg", connection=conn)], connection=conn,
+           maintenance_interval=RQ_MAINTENANCE_SECONDS).work(burst=args.burst)
     return 0

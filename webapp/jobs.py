@@ -208,14 +208,16 @@ class RQQueue(JobQueue):
                 log.warning("rq reaper: %r", exc)
 
     def get(self, job_id: str) -> Job | None:
-        """The record; a never-started job RQ could not run (its worker failed it) is recorded as failed."""
+        """The record; a queued job whose current RQ job failed before any horse claimed it (its worker died after
+        taking it from the queue, and RQ's maintenance failed it) is recorded as failed."""
         job = self.store.get(job_id)
-        if job is not None and job.state == QUEUED and not job.attempts:
+        if job is not None and job.state == QUEUED:
             from rq.exceptions import NoSuchJobError  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
             from rq.job import Job as RQJob  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
 
+            rq_id = job_id if not job.attempts else f"{job_id}-retry{job.attempts}"  # as _enqueue names it
             try:
-                status = RQJob.fetch(job_id, connection=self.connection).get_status(refresh=True)
+                status = RQJob.fetch(rq_id, connection=self.connection).get_status(refresh=True)
             except NoSuchJobError:
                 status = None
             if status is not None and str(getattr(status, "value", status)) in ("failed", "stopped"):
