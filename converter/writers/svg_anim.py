@@ -680,11 +680,10 @@ def _d_animations(tl: collapse.Timeline, p: int, t: int, gain: np.ndarray | None
     firsts: list[str] = []
     n_keys = 0
     moving, off, per_key = np.zeros(p, bool), np.zeros((p, 2), np.int64), np.zeros(p)
-    lo, hi = None, None
+    lows, highs = [], []
     a = 0
-    while a < p:  # whole paths, about KEY_TEXT_KEYS keys a block
-        b = max(a + 1, int(np.searchsorted(bounds, bounds[a] + KEY_TEXT_KEYS, side="right")) - 1)
-        b = min(b, p)
+    while a < p:  # whole paths, about KEY_TEXT_KEYS keys a block (at least one path)
+        b = min(p, max(a + 1, int(np.searchsorted(bounds, bounds[a] + KEY_TEXT_KEYS, side="right")) - 1))
         ks = slice(bounds[a], bounds[b])
         pk = tl.path[ks] - a
         sub = collapse.Timeline(pk, tl.half[ks], tl.values[ks], tl.collapsed[ks], tl.snap[ks])
@@ -692,8 +691,8 @@ def _d_animations(tl: collapse.Timeline, p: int, t: int, gain: np.ndarray | None
         px = (gain[a:b][pk] if gain is not None else 1.0) / view_scale  # local units -> output px
         kt_text, decimals = timeline_key_times(sub, rows, t, px, time_budget)
         if len(decimals):
-            lo = min(int(decimals.min()), lo if lo is not None else 99)
-            hi = max(int(decimals.max()), hi if hi is not None else -1)
+            lows.append(int(decimals.min()))
+            highs.append(int(decimals.max()))
         moving[a:b] = _varying(pk, b - a, rows)
         o = offsets(rows, pk, b - a)
         o[~moving[a:b]] = 0
@@ -706,7 +705,7 @@ def _d_animations(tl: collapse.Timeline, p: int, t: int, gain: np.ndarray | None
         per_key[a:b] = np.bincount(pk, np.fromiter(map(len, text), np.float64, len(text)), b - a)
         a = b
     per_key /= np.maximum(counts, 1)
-    return anims, firsts, n_keys, moving, off, counts, per_key, [] if lo is None else [lo, hi]
+    return anims, firsts, n_keys, moving, off, counts, per_key, [min(lows), max(highs)] if lows else []
 
 
 def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: np.ndarray, owned: list,
