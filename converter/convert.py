@@ -13,6 +13,7 @@ from converter import cloning, formats, framing, mpeg4, simplify, smoothing
 from converter import extract as extraction
 from converter.animation import FaceAnimation
 from converter.blendshapes import drive_file
+from converter.encode.parallel import serial_blas
 from converter.errors import InputError
 from converter.mpeg4 import fat2d
 from converter.options import ConversionOptions, Progress, Report, no_progress
@@ -112,13 +113,14 @@ def convert_animation(
     anim = prepare(anim, options, report, progress)
     if on_prepared is not None:  # callers that also need the 3D animation (the web UI's prerender)
         on_prepared(anim)
-    data2d = STAGES[kind.stage](anim, options, report, lambda s, f: progress(s, 0.1 + 0.5 * f))
-    if isinstance(data2d, Sheet):  # the SVG metadata names its source file
-        data2d.info["source_sha256"] = source_sha256
-    write = kind.writer_for(options)
-    t = time.perf_counter()
-    progress("write", 0.6)
-    data = write(data2d, options, report)
+    with serial_blas():
+        data2d = STAGES[kind.stage](anim, options, report, lambda s, f: progress(s, 0.1 + 0.5 * f))
+        if isinstance(data2d, Sheet):  # the SVG metadata names its source file
+            data2d.info["source_sha256"] = source_sha256
+        write = kind.writer_for(options)
+        t = time.perf_counter()
+        progress("write", 0.6)
+        data = write(data2d, options, report)
     report.sizes[kind.name] = len(data)
     out = kind.file_for(options)
     if out.gzip:
