@@ -34,116 +34,106 @@ BLOCK_CELLS = 1 << 18  # ... and at most about this many track-frames: a long ca
 SLACK = 1e-8  # the bound holds to eps + SLACK (eps + |x| + 1); tracks the final check rejects get sampled keys
 
 
-@numba.njit(cache=True, nogil=True)
-def _clip(src, n, a, b, c, dst) -> int:
-    """Convex polygon src[:n] (points (p, v)) cut to a*p + b*v <= c, into dst; returns its vertex count.
+# The helpers address a polygon as (array, index), never as a slice, and are inlined: a slice or an argument is
+# an array numba reference-counts with atomic operations, which took half the loop's time (and contended between
+# threads sharing x).
+@numba.njit(cache=True, nogil=True, inline="always")
+def _clip(src, si, n, a, b, c, dst, di) -> int:
+    """Convex polygon src[si, :n] (points (p, v)) cut to a*p + b*v <= c, into dst[di]; returns its vertex count.
 
     A vertex within ON_LINE of the line counts as on it: kept, and no new vertex is made next to it. Without
     that, rounding adds near-copies of vertices at every cut and the polygons outgrow MAX_VERTS."""
     tol = ON_LINE * (abs(c) + 1.0)
     m = 0
+    cap = dst.shape[1]
     for i in range(n):
         j = i + 1 if i + 1 < n else 0
-        si = a * src[i, 0] + b * src[i, 1] - c
-        sj = a * src[j, 0] + b * src[j, 1] - c
-        if si <= tol:
-            if m < dst.shape[0]:
-                dst[m, 0] = src[i, 0]
-                dst[m, 1] = src[i, 1]
+        gi = a * src[si, i, 0] + b * src[si, i, 1] - c
+        gj = a * src[si, j, 0] + b * src[si, j, 1] - c
+        if gi <= tol:
+            if m < cap:
+                dst[di, m, 0] = src[si, i, 0]
+                dst[di, m, 1] = src[si, i, 1]
             m += 1
-        if (si < -tol and sj > tol) or (si > tol and sj < -tol):
-            f = si / (si - sj)
-            if m < dst.shape[0]:
-                dst[m, 0] = src[i, 0] + f * (src[j, 0] - src[i, 0])
-                dst[m, 1] = src[i, 1] + f * (src[j, 1] - src[i, 1])
+        if (gi < -tol and gj > tol) or (gi > tol and gj < -tol):
+            f = gi / (gi - gj)
+            if m < cap:
+                dst[di, m, 0] = src[si, i, 0] + f * (src[si, j, 0] - src[si, i, 0])
+                dst[di, m, 1] = src[si, i, 1] + f * (src[si, j, 1] - src[si, i, 1])
             m += 1
     return m
 
 
-@numba.njit(cache=True, nogil=True)
-def _strip(src, n, tau, lo, hi, tmp, dst) -> int:
-    """Polygon src[:n] cut to lo <= p + tau v <= hi, into dst (tmp is scratch); 0 when empty, -1 when the strip
-    holds all of it (dst untouched)."""
+@numba.njit(cache=True, nogil=True, inline="always")
+def _strip(src, si, n, tau, lo, hi, tmp, dst, di) -> int:
+    """Polygon src[si, :n] cut to lo <= p + tau v <= hi, into dst[di] (tmp[0] is scratch); 0 when empty, -1 when
+    the strip holds all of it (dst untouched)."""
     q_lo, q_hi = np.inf, -np.inf
     for i in range(n):
-        q = src[i, 0] + tau * src[i, 1]
+        q = src[si, i, 0] + tau * src[si, i, 1]
         q_lo, q_hi = min(q_lo, q), max(q_hi, q)
     if q_lo >= lo and q_hi <= hi:
         return -1
     if q_hi < lo or q_lo > hi:
         return 0
     if q_hi <= hi:
-        return _clip(src, n, -1.0, -tau, -lo, dst)
+        return _clip(src, si, n, -1.0, -tau, -lo, dst, di)
     if q_lo >= lo:
-        return _clip(src, n, 1.0, tau, hi, dst)
-    m = _clip(src, n, 1.0, tau, hi, tmp)
-    if m == 0 or m > tmp.shape[0]:
+        return _clip(src, si, n, 1.0, tau, hi, dst, di)
+    m = _clip(src, si, n, 1.0, tau, hi, tmp, 0)
+    if m == 0 or m > tmp.shape[1]:
         return m
-    return _clip(tmp, m, -1.0, -tau, -lo, dst)
+    return _clip(tmp, 0, m, -1.0, -tau, -lo, dst, di)
 
 
-@numba.njit(cache=True, nogil=True)
-def _rect(dst, lo, hi) -> int:
-    dst[0, 0], dst[0, 1] = lo, -BIG
-    dst[1, 0], dst[1, 1] = hi, -BIG
-    dst[2, 0], dst[2, 1] = hi, BIG
-    dst[3, 0], dst[3, 1] = lo, BIG
+@numba.njit(cache=True, nogil=True, inline="always")
+def _rect(dst, di, lo, hi) -> int:
+    dst[di, 0, 0], dst[di, 0, 1] = lo, -BIG
+    dst[di, 1, 0], dst[di, 1, 1] = hi, -BIG
+    dst[di, 2, 0], dst[di, 2, 1] = hi, BIG
+    dst[di, 3, 0], dst[di, 3, 1] = lo, BIG
     return 4
 
 
-@numba.njit(cache=True, nogil=True)
-def _on_line(poly, n, span, y) -> float:
-    """A p with (p, v) in the polygon and p + span v = y: the middle of that chord (nearest vertex if missed)."""
+@numba.njit(cache=True, nogil=True, inline="always")
+def _on_line(poly, pi, n, span, y) -> float:
+    """A p with (p, v) in the polygon poly[pi, :n] and p + span v = y: the middle of that chord (nearest vertex if
+    missed)."""
     lo, hi = np.inf, -np.inf
     best, best_g = 0.0, np.inf
     for i in range(n):
         j = i + 1 if i + 1 < n else 0
-        gi = poly[i, 0] + span * poly[i, 1] - y
-        gj = poly[j, 0] + span * poly[j, 1] - y
+        gi = poly[pi, i, 0] + span * poly[pi, i, 1] - y
+        gj = poly[pi, j, 0] + span * poly[pi, j, 1] - y
         if abs(gi) < best_g:
-            best_g, best = abs(gi), poly[i, 0] - gi  # shift p so the line is met exactly
+            best_g, best = abs(gi), poly[pi, i, 0] - gi  # shift p so the line is met exactly
         if gi == 0.0:
-            lo, hi = min(lo, poly[i, 0]), max(hi, poly[i, 0])
+            lo, hi = min(lo, poly[pi, i, 0]), max(hi, poly[pi, i, 0])
         elif (gi < 0.0) != (gj < 0.0) and gj != 0.0:
-            p = poly[i, 0] + gi / (gi - gj) * (poly[j, 0] - poly[i, 0])
+            p = poly[pi, i, 0] + gi / (gi - gj) * (poly[pi, j, 0] - poly[pi, i, 0])
             lo, hi = min(lo, p), max(hi, p)
     return 0.5 * (lo + hi) if lo <= hi else best
 
 
-@numba.njit(cache=True, nogil=True)
-def _slowest(poly, n):
-    """The (p, v) of the polygon with the smallest |v|: on v = 0 (middle of that chord) when it crosses it."""
+@numba.njit(cache=True, nogil=True, inline="always")
+def _slowest(poly, pi, n):
+    """The (p, v) of the polygon poly[pi, :n] with the smallest |v|: on v = 0 (middle of that chord) when it
+    crosses it."""
     lo, hi = np.inf, -np.inf
-    bp, bv = poly[0, 0], poly[0, 1]
+    bp, bv = poly[pi, 0, 0], poly[pi, 0, 1]
     for i in range(n):
         j = i + 1 if i + 1 < n else 0
-        vi, vj = poly[i, 1], poly[j, 1]
+        vi, vj = poly[pi, i, 1], poly[pi, j, 1]
         if abs(vi) < abs(bv):
-            bp, bv = poly[i, 0], vi
+            bp, bv = poly[pi, i, 0], vi
         if vi == 0.0:
-            lo, hi = min(lo, poly[i, 0]), max(hi, poly[i, 0])
+            lo, hi = min(lo, poly[pi, i, 0]), max(hi, poly[pi, i, 0])
         elif (vi < 0.0) != (vj < 0.0) and vj != 0.0:
-            p = poly[i, 0] + vi / (vi - vj) * (poly[j, 0] - poly[i, 0])
+            p = poly[pi, i, 0] + vi / (vi - vj) * (poly[pi, j, 0] - poly[pi, i, 0])
             lo, hi = min(lo, p), max(hi, p)
     if lo <= hi:
         return 0.5 * (lo + hi), 0.0
     return bp, bv
-
-
-@numba.njit(cache=True, nogil=True)
-def _advance(poly, cnt, tau, xk, e, tmp, nxt, ncnt) -> bool:
-    """Every coordinate's polygon cut by frame k's strip, kept when none empties or outgrows MAX_VERTS."""
-    for c in range(poly.shape[0]):
-        ncnt[c] = _strip(poly[c], cnt[c], tau, xk[c] - e, xk[c] + e, tmp, nxt[c])
-        if ncnt[c] == 0 or ncnt[c] > MAX_VERTS - 4:
-            return False
-    for c in range(poly.shape[0]):
-        if ncnt[c] > 0:
-            cnt[c] = ncnt[c]
-            for i in range(ncnt[c]):
-                poly[c, i, 0] = nxt[c, i, 0]
-                poly[c, i, 1] = nxt[c, i, 1]
-    return True
 
 
 @numba.njit(cache=True, nogil=True)
@@ -155,9 +145,9 @@ def _reduce(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
     nxt = np.empty((d, MAX_VERTS, 2))
     cnt = np.empty(d, np.int64)
     ncnt = np.empty(d, np.int64)
-    tmp = np.empty((MAX_VERTS, 2))
+    tmp = np.empty((1, MAX_VERTS, 2))
     seg_t = np.empty(t + 1, np.int64)
-    seg_poly = np.empty((t + 1, d, MAX_VERTS, 2))
+    seg_poly = np.empty(((t + 1) * d, MAX_VERTS, 2))  # segment i's polygon of coordinate c at i * d + c
     seg_cnt = np.empty((t + 1, d), np.int64)
     for j in range(first, stop):
         e = eps[j]
@@ -165,45 +155,67 @@ def _reduce(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
         last = -1
         nseg = 0
         for c in range(d):
-            cnt[c] = _rect(poly[c], -BIG, BIG)
+            cnt[c] = _rect(poly, c, -BIG, BIG)
         for k in range(t):
             if not active[k, j]:
                 continue
-            if not _advance(poly, cnt, k - s, x[k, j], e, tmp, nxt, ncnt):
-                if last <= s:
-                    bad[j] = True
-                    continue
+            # Frame k's strip cuts every coordinate's polygon. When one would empty (or outgrow MAX_VERTS), the
+            # last active frame becomes a key and the cut is made again from there. (Written out here, not as a
+            # function: numba reference-counts the arrays passed to a call, two atomic operations each a frame.)
+            for attempt in range(2):
+                ok = True
+                for c in range(d):
+                    xc = x[k, j, c]
+                    ncnt[c] = _strip(poly, c, cnt[c], k - s, xc - e, xc + e, tmp, nxt, c)
+                    if ncnt[c] == 0 or ncnt[c] > MAX_VERTS - 4:
+                        ok = False
+                        break
+                if ok:
+                    for c in range(d):
+                        if ncnt[c] > 0:
+                            cnt[c] = ncnt[c]
+                            for i in range(ncnt[c]):
+                                poly[c, i, 0] = nxt[c, i, 0]
+                                poly[c, i, 1] = nxt[c, i, 1]
+                    break
+                if attempt == 1 or last <= s:
+                    bad[j] = True  # on the second attempt it cannot happen with a free velocity: safety net only
+                    break
                 # The last active frame becomes a key; its window is where the segment can end.
                 seg_t[nseg] = s
                 span = last - s
                 for c in range(d):
                     seg_cnt[nseg, c] = cnt[c]
-                    seg_poly[nseg, c, :cnt[c]] = poly[c, :cnt[c]]
                     lo, hi = np.inf, -np.inf
                     for i in range(cnt[c]):
+                        seg_poly[nseg * d + c, i, 0] = poly[c, i, 0]
+                        seg_poly[nseg * d + c, i, 1] = poly[c, i, 1]
                         y = poly[c, i, 0] + span * poly[c, i, 1]
                         lo, hi = min(lo, y), max(hi, y)
-                    cnt[c] = _rect(poly[c], lo, hi)
+                    cnt[c] = _rect(poly, c, lo, hi)
                 nseg += 1
                 s = last
                 if nseg + 2 >= limit[j] and not bad[j]:  # keys so far, the open segment's and the loop end's
                     gave_up[j] = True
                     break
-                if not _advance(poly, cnt, k - s, x[k, j], e, tmp, nxt, ncnt):
-                    bad[j] = True  # cannot happen with a free velocity: safety net only
-                    continue
+            if gave_up[j]:
+                break
+            if not ok:
+                continue
             last = k
         if last < 0 or gave_up[j]:
             continue  # never active, or not worth finishing: no keys
         seg_t[nseg] = s
         for c in range(d):
             seg_cnt[nseg, c] = cnt[c]
-            seg_poly[nseg, c, :cnt[c]] = poly[c, :cnt[c]]
+            for i in range(cnt[c]):
+                seg_poly[nseg * d + c, i, 0] = poly[c, i, 0]
+                seg_poly[nseg * d + c, i, 1] = poly[c, i, 1]
         nseg += 1
         # Backward: the loop-end key with the slowest last segment, then each key mid-way along its chord.
         mask[t, j] = True
         for c in range(d):
-            p, v = _slowest(seg_poly[nseg - 1, c], seg_cnt[nseg - 1, c])
+            p, v = _slowest(seg_poly, (nseg - 1) * d + c, seg_cnt[nseg - 1, c])
             values[t, j, c] = p + v * (t - seg_t[nseg - 1])
             values[seg_t[nseg - 1], j, c] = p
         mask[seg_t[nseg - 1], j] = True
@@ -211,7 +223,8 @@ def _reduce(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
             mask[seg_t[i], j] = True
             span = seg_t[i + 1] - seg_t[i]
             for c in range(d):
-                values[seg_t[i], j, c] = _on_line(seg_poly[i, c], seg_cnt[i, c], span, values[seg_t[i + 1], j, c])
+                values[seg_t[i], j, c] = _on_line(seg_poly, i * d + c, seg_cnt[i, c], span,
+                                                  values[seg_t[i + 1], j, c])
         # The bound, checked on what was built (numerical safety net).
         i = 0
         for k in range(t):
