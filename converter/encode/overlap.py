@@ -19,27 +19,29 @@ PAIR_BITMAP_MAX = 1 << 26  # path pairs deduplicated through a bitmap up to this
 STROKE_MARGIN_PX = 0.5  # two paths closer than this may share stroke pixels: their order is kept
 
 
-@numba.njit(cache=True, nogil=True)
-def _span(tri, nx, ny):
-    """Lowest and highest projection of triangle tri (3, 2) on the axis (nx, ny)."""
-    p0 = nx * tri[0, 0] + ny * tri[0, 1]
-    p1 = nx * tri[1, 0] + ny * tri[1, 1]
-    p2 = nx * tri[2, 0] + ny * tri[2, 1]
+# The compiled helpers address a triangle as (pts, frame, path), never as a slice, and are inlined: a slice or an
+# array argument is reference-counted with atomic operations on every call, contended between threads.
+@numba.njit(cache=True, nogil=True, inline="always")
+def _span(pts, f, a, nx, ny):
+    """Lowest and highest projection of triangle pts[f, a] (3, 2) on the axis (nx, ny)."""
+    p0 = nx * pts[f, a, 0, 0] + ny * pts[f, a, 0, 1]
+    p1 = nx * pts[f, a, 1, 0] + ny * pts[f, a, 1, 1]
+    p2 = nx * pts[f, a, 2, 0] + ny * pts[f, a, 2, 1]
     return min(min(p0, p1), p2), max(max(p0, p1), p2)
 
 
-@numba.njit(cache=True, nogil=True)
-def _apart(ta, tb, margin) -> bool:
-    """Triangles ta, tb (3, 2) are more than margin apart along one of their 6 edge normals (a negative margin:
-    overlap by less than -margin there)."""
+@numba.njit(cache=True, nogil=True, inline="always")
+def _apart(pts, f, a, b, margin) -> bool:
+    """Triangles pts[f, a] and pts[f, b] (3, 2) are more than margin apart along one of their 6 edge normals (a
+    negative margin: overlap by less than -margin there)."""
     for side in range(2):
-        tri = ta if side == 0 else tb
+        tri = a if side == 0 else b
         for i in range(3):
             k = (i + 1) % 3
-            nx = -(tri[k, 1] - tri[i, 1])
-            ny = tri[k, 0] - tri[i, 0]
-            a_lo, a_hi = _span(ta, nx, ny)
-            b_lo, b_hi = _span(tb, nx, ny)
+            nx = -(pts[f, tri, k, 1] - pts[f, tri, i, 1])
+            ny = pts[f, tri, k, 0] - pts[f, tri, i, 0]
+            a_lo, a_hi = _span(pts, f, a, nx, ny)
+            b_lo, b_hi = _span(pts, f, b, nx, ny)
             # Gap of the two projections (minus their overlap): beyond the edge test's gap when one projection
             # holds the other, which only a negative margin (interiors overlapping by -margin) can see.
             if max(a_lo, b_lo) - min(a_hi, b_hi) > margin * np.sqrt(nx * nx + ny * ny):
@@ -55,16 +57,15 @@ def _meet(pts, on, la, lb, margin, out, first, stop) -> None:
         for f in range(pts.shape[0]):
             if not (on[f, a] and on[f, b]):
                 continue
-            pa, pb = pts[f, a], pts[f, b]
             near = True
             for ax in range(2):
-                lo_a = min(min(pa[0, ax], pa[1, ax]), pa[2, ax])
-                hi_a = max(max(pa[0, ax], pa[1, ax]), pa[2, ax])
-                lo_b = min(min(pb[0, ax], pb[1, ax]), pb[2, ax])
-                hi_b = max(max(pb[0, ax], pb[1, ax]), pb[2, ax])
+                lo_a = min(min(pts[f, a, 0, ax], pts[f, a, 1, ax]), pts[f, a, 2, ax])
+                hi_a = max(max(pts[f, a, 0, ax], pts[f, a, 1, ax]), pts[f, a, 2, ax])
+                lo_b = min(min(pts[f, b, 0, ax], pts[f, b, 1, ax]), pts[f, b, 2, ax])
+                hi_b = max(max(pts[f, b, 0, ax], pts[f, b, 1, ax]), pts[f, b, 2, ax])
                 if max(lo_a, lo_b) > min(hi_a, hi_b) + margin:
                     near = False
-            if near and not _apart(pa, pb, margin):
+            if near and not _apart(pts, f, a, b, margin):
                 out[c] = True
                 break
 
@@ -74,9 +75,35 @@ def apart(pa: np.ndarray, pb: np.ndarray, margin: float) -> np.ndarray:
     (a separating-axis test; False may still mean apart, never the reverse)."""
     a, b = np.broadcast_arrays(np.asarray(pa, np.float32), np.asarray(pb, np.float32))
     shape = a.shape[:-2]
-    a, b = a.reshape(-1, 3, 2), b.reshape(-1, 3, 2)
-    m = np.float32(margin)
-    return np.array([_apart(a[i], b[i], m) for i in range(len(a))], bool).reshape(shape)
+    pairs = np.ascontiguousarray(np.stack([a.reshape(-1, 3, 2), b.reshape(-1, 3, 2)], axis=1))  # (N, 2, 3, 2)
+    return _apart_each(pairs, np.float32(margin)).reshape(shape)
+
+
+@numba.njit(cache=True, nogil=True)
+def _apart_each(pairs, margin):
+    """_apart of each pair of triangles pairs[i, 0], pairs[i, 1]."""
+    out = np.empty(pairs.shape[0], np.bool_)
+    for i in range(pairs.shape[0]):
+        out[i] = _apart(pairs, i, 0, 1, margin)
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _boxes(pts, on, grow):
+    """Per path, the box (lo, hi (n, 2)) of its triangles pts (B, n, 3, 2) over the frames on (B, n) where it is
+    drawn, grown by grow on every side."""
+    n = pts.shape[1]
+    lo = np.full((n, 2), np.inf, np.float32)
+    hi = np.full((n, 2), -np.inf, np.float32)
+    for f in range(pts.shape[0]):
+        for a in range(n):
+            if not on[f, a]:
+                continue
+            for v in range(3):
+                for ax in range(2):
+                    lo[a, ax] = min(lo[a, ax], pts[f, a, v, ax])
+                    hi[a, ax] = max(hi[a, ax], pts[f, a, v, ax])
+    return lo - grow, hi + grow
 
 
 def _cell_lists(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -151,6 +178,7 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP
     m32 = np.float32(margin)
     seen = np.zeros(p * p, bool) if p * p <= PAIR_BITMAP_MAX else None  # dedupe by scatter, not by sorting
     found = []
+    last_m = 0
     for k0 in range(0, t, block):
         act = active[k0:k0 + block]
         idx = np.flatnonzero(act.any(axis=0))
@@ -161,13 +189,12 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP
         else:
             pts = np.asarray(xy32[k0:k0 + block][:, corners[idx]], np.float32)
         on = act[:, idx]
-        lo = np.where(on[:, :, None], pts.min(axis=2), np.inf).min(axis=0) - margin / 2  # corners first: 3x less
-        hi = np.where(on[:, :, None], pts.max(axis=2), -np.inf).max(axis=0) + margin / 2  # to mask
+        lo, hi = _boxes(pts, on, np.float32(margin / 2))
         cell = max(1.5 * float(np.median((hi - lo).max(axis=1))), 1.0)
         key, owner, c0 = _cell_lists(lo, hi, cell)
         own_band = band[idx] if band is not None else np.arange(len(idx))  # most neighbours share a band
-        out = np.empty((4 * len(idx), 2), np.int64)
-        m = _candidates(key, owner, c0, own_band, lo, hi, out)
+        out = np.empty((max(4 * len(idx), last_m + last_m // 4), 2), np.int64)  # blocks alike: rarely twice
+        m = last_m = _candidates(key, owner, c0, own_band, lo, hi, out)
         if m > len(out):
             out = np.empty((m, 2), np.int64)
             _candidates(key, owner, c0, own_band, lo, hi, out)
