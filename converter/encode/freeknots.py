@@ -34,58 +34,9 @@ BLOCK_CELLS = 1 << 18  # ... and at most about this many track-frames: a long ca
 SLACK = 1e-8  # the bound holds to eps + SLACK (eps + |x| + 1); tracks the final check rejects get sampled keys
 
 
-# The helpers address a polygon as (array, index), never as a slice, and are inlined: a slice or an argument is
-# an array numba reference-counts with atomic operations, which took half the loop's time (and contended between
-# threads sharing x).
-@numba.njit(cache=True, nogil=True, inline="always")
-def _clip(src, si, n, a, b, c, dst, di) -> int:
-    """Convex polygon src[si, :n] (points (p, v)) cut to a*p + b*v <= c, into dst[di]; returns its vertex count.
-
-    A vertex within ON_LINE of the line counts as on it: kept, and no new vertex is made next to it. Without
-    that, rounding adds near-copies of vertices at every cut and the polygons outgrow MAX_VERTS."""
-    tol = ON_LINE * (abs(c) + 1.0)
-    m = 0
-    cap = dst.shape[1]
-    for i in range(n):
-        j = i + 1 if i + 1 < n else 0
-        gi = a * src[si, i, 0] + b * src[si, i, 1] - c
-        gj = a * src[si, j, 0] + b * src[si, j, 1] - c
-        if gi <= tol:
-            if m < cap:
-                dst[di, m, 0] = src[si, i, 0]
-                dst[di, m, 1] = src[si, i, 1]
-            m += 1
-        if (gi < -tol and gj > tol) or (gi > tol and gj < -tol):
-            f = gi / (gi - gj)
-            if m < cap:
-                dst[di, m, 0] = src[si, i, 0] + f * (src[si, j, 0] - src[si, i, 0])
-                dst[di, m, 1] = src[si, i, 1] + f * (src[si, j, 1] - src[si, i, 1])
-            m += 1
-    return m
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _strip(src, si, n, tau, lo, hi, tmp, dst, di) -> int:
-    """Polygon src[si, :n] cut to lo <= p + tau v <= hi, into dst[di] (tmp[0] is scratch); 0 when empty, -1 when
-    the strip holds all of it (dst untouched)."""
-    q_lo, q_hi = np.inf, -np.inf
-    for i in range(n):
-        q = src[si, i, 0] + tau * src[si, i, 1]
-        q_lo, q_hi = min(q_lo, q), max(q_hi, q)
-    if q_lo >= lo and q_hi <= hi:
-        return -1
-    if q_hi < lo or q_lo > hi:
-        return 0
-    if q_hi <= hi:
-        return _clip(src, si, n, -1.0, -tau, -lo, dst, di)
-    if q_lo >= lo:
-        return _clip(src, si, n, 1.0, tau, hi, dst, di)
-    m = _clip(src, si, n, 1.0, tau, hi, tmp, 0)
-    if m == 0 or m > tmp.shape[1]:
-        return m
-    return _clip(tmp, 0, m, -1.0, -tau, -lo, dst, di)
-
-
+# The polygons live in one array, addressed by slot, and the helpers are inlined: numba reference-counts every
+# array a function receives (atomic operations, contended between threads sharing x), which took half the loop's
+# time when each cut was a call on slices.
 @numba.njit(cache=True, nogil=True, inline="always")
 def _rect(dst, di, lo, hi) -> int:
     dst[di, 0, 0], dst[di, 0, 1] = lo, -BIG
@@ -141,11 +92,9 @@ def _reduce(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
     """Free-knot keys of tracks first..stop-1 into mask and values; bad marks tracks that need
     sampled keys. A track stops early (gave_up, no keys written) once it cannot end with fewer than limit keys."""
     t, n, d = x.shape
-    poly = np.empty((d, MAX_VERTS, 2))
-    nxt = np.empty((d, MAX_VERTS, 2))
+    poly = np.empty((2 * d + 1, MAX_VERTS, 2))  # slot c: coordinate c's polygon; d + c: its next; 2d: scratch
     cnt = np.empty(d, np.int64)
     ncnt = np.empty(d, np.int64)
-    tmp = np.empty((1, MAX_VERTS, 2))
     seg_t = np.empty(t + 1, np.int64)
     seg_poly = np.empty(((t + 1) * d, MAX_VERTS, 2))  # segment i's polygon of coordinate c at i * d + c
     seg_cnt = np.empty((t + 1, d), np.int64)
@@ -159,15 +108,60 @@ def _reduce(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
         for k in range(t):
             if not active[k, j]:
                 continue
-            # Frame k's strip cuts every coordinate's polygon. When one would empty (or outgrow MAX_VERTS), the
-            # last active frame becomes a key and the cut is made again from there. (Written out here, not as a
-            # function: numba reference-counts the arrays passed to a call, two atomic operations each a frame.)
+            # Frame k's strip lo <= p + tau v <= hi cuts every coordinate's polygon. When one would empty (or
+            # outgrow MAX_VERTS), the last active frame becomes a key and the cut is made again from there. (The
+            # cut is written out here, not called: see the note above _rect.)
+            tau = k - s
             for attempt in range(2):
                 ok = True
                 for c in range(d):
-                    xc = x[k, j, c]
-                    ncnt[c] = _strip(poly, c, cnt[c], k - s, xc - e, xc + e, tmp, nxt, c)
-                    if ncnt[c] == 0 or ncnt[c] > MAX_VERTS - 4:
+                    lo, hi = x[k, j, c] - e, x[k, j, c] + e
+                    q_lo, q_hi = np.inf, -np.inf
+                    for i in range(cnt[c]):
+                        q = poly[c, i, 0] + tau * poly[c, i, 1]
+                        q_lo, q_hi = min(q_lo, q), max(q_hi, q)
+                    m = -1  # the strip holds all of it: unchanged
+                    if q_hi < lo or q_lo > hi:
+                        m = 0
+                    elif q_lo < lo or q_hi > hi:
+                        # Cut by the side(s) it crosses, hi first (into the scratch slot when lo cuts too). A vertex
+                        # within ON_LINE of a line counts as on it: kept, and no new vertex is made next to it.
+                        # Without that, rounding adds near-copies of vertices at every cut and the polygons
+                        # outgrow MAX_VERTS.
+                        src, m = c, cnt[c]
+                        for side in range(2):
+                            if side == 0:
+                                if q_hi <= hi:
+                                    continue
+                                a, b, cut = 1.0, tau, hi
+                                dst = 2 * d if q_lo < lo else d + c
+                            else:
+                                if q_lo >= lo:
+                                    continue
+                                a, b, cut = -1.0, -tau, -lo
+                                dst = d + c
+                            n_src, m = m, 0
+                            tol = ON_LINE * (abs(cut) + 1.0)
+                            for i in range(n_src):
+                                i2 = i + 1 if i + 1 < n_src else 0
+                                gi = a * poly[src, i, 0] + b * poly[src, i, 1] - cut
+                                gj = a * poly[src, i2, 0] + b * poly[src, i2, 1] - cut
+                                if gi <= tol:
+                                    if m < MAX_VERTS:
+                                        poly[dst, m, 0] = poly[src, i, 0]
+                                        poly[dst, m, 1] = poly[src, i, 1]
+                                    m += 1
+                                if (gi < -tol and gj > tol) or (gi > tol and gj < -tol):
+                                    f = gi / (gi - gj)
+                                    if m < MAX_VERTS:
+                                        poly[dst, m, 0] = poly[src, i, 0] + f * (poly[src, i2, 0] - poly[src, i, 0])
+                                        poly[dst, m, 1] = poly[src, i, 1] + f * (poly[src, i2, 1] - poly[src, i, 1])
+                                    m += 1
+                            if m == 0 or m > MAX_VERTS:
+                                break
+                            src = dst
+                    ncnt[c] = m
+                    if m == 0 or m > MAX_VERTS - 4:
                         ok = False
                         break
                 if ok:
@@ -175,8 +169,8 @@ def _reduce(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
                         if ncnt[c] > 0:
                             cnt[c] = ncnt[c]
                             for i in range(ncnt[c]):
-                                poly[c, i, 0] = nxt[c, i, 0]
-                                poly[c, i, 1] = nxt[c, i, 1]
+                                poly[c, i, 0] = poly[d + c, i, 0]
+                                poly[c, i, 1] = poly[d + c, i, 1]
                     break
                 if attempt == 1 or last <= s:
                     bad[j] = True  # on the second attempt it cannot happen with a free velocity: safety net only
@@ -195,6 +189,7 @@ def _reduce(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
                     cnt[c] = _rect(poly, c, lo, hi)
                 nseg += 1
                 s = last
+                tau = k - s
                 if nseg + 2 >= limit[j] and not bad[j]:  # keys so far, the open segment's and the loop end's
                     gave_up[j] = True
                     break
