@@ -112,3 +112,24 @@ def test_fit_in_chunks_frames_exactly_as_in_one_piece(monkeypatch):
         np.testing.assert_array_equal(whole.projection, chunked.projection)
         xy, _, _ = whole.project(frames.reshape(-1, 3))
         assert xy.min() >= 0 and xy.max() <= whole.width  # every vertex of every frame is in view
+
+
+def test_culling_matches_its_per_corner_definition_on_random_triangles():
+    # Front (negative signed area with y down), every corner in front of the eye (w > 0), and not all three
+    # corners beyond one side of the view volume; NaN corners count as failing every comparison.
+    rng = np.random.default_rng(5)
+    t, v, f, size = 6, 300, 900, 64
+    faces = rng.integers(0, v, (f, 3)).astype(np.int32)
+    xy = rng.uniform(-40, 104, (t, v, 2))
+    z, w = rng.uniform(-1.3, 1.3, (t, v)), rng.uniform(-0.5, 2.0, (t, v))
+    xy[0, :7], z[1, :7], w[2, :7] = np.nan, np.nan, np.nan
+    corner = lambda a: a[:, faces]  # noqa: E731
+    tx, ty, tz, tw = corner(xy[..., 0]), corner(xy[..., 1]), corner(z), corner(w)
+    area2 = ((tx[..., 1] - tx[..., 0]) * (ty[..., 2] - ty[..., 0])
+             - (ty[..., 1] - ty[..., 0]) * (tx[..., 2] - tx[..., 0]))
+    outside = ((tx < 0).all(-1) | (tx > size).all(-1) | (ty < 0).all(-1) | (ty > size).all(-1)
+               | (tz < -1).all(-1) | (tz > 1).all(-1))
+    expected = (area2 < 0) & (tw > 0).all(-1) & ~outside
+    got = cull(xy, z, w, faces, size, size)
+    assert 0 < expected.sum() < expected.size
+    assert np.array_equal(got, expected)
