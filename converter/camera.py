@@ -41,8 +41,7 @@ class Camera(NamedTuple):
         def chunks():  # float64 copies one chunk at a time: a long clip has millions of points
             return (np.asarray(pts[s:s + FIT_CHUNK], np.float64) for s in range(0, len(pts), FIT_CHUNK))
 
-        lo = np.min([c.min(axis=0) for c in chunks()], axis=0)
-        hi = np.max([c.max(axis=0) for c in chunks()], axis=0)
+        lo, hi = _extent(pts)
         center = (lo + hi) / 2
         radius = float(np.linalg.norm(hi - lo) / 2) or 1.0
         y, p = math.radians(yaw), math.radians(pitch)
@@ -104,6 +103,20 @@ class Camera(NamedTuple):
             int(data["viewport"][1]),
             bool(data.get("ortho", False)),
         )
+
+
+def _extent(pts: np.ndarray, rows: int = 1024) -> tuple[np.ndarray, np.ndarray]:
+    """Per column minimum and maximum (float64) of points pts (N, 3), exact, without float64 copies.
+
+    Reduced as (N / rows, 3 rows) blocks: numpy reduces an (N, 3) array along axis 0 three values at a time,
+    ~20x slower on a long clip's hundred million points."""
+    head = len(pts) - len(pts) % rows
+    parts = [pts[head:]] if head < len(pts) else []
+    if head:
+        wide = pts[:head].reshape(-1, 3 * rows)
+        parts += [wide.min(axis=0).reshape(rows, 3), wide.max(axis=0).reshape(rows, 3)]
+    both = np.concatenate(parts)
+    return both.min(axis=0).astype(np.float64), both.max(axis=0).astype(np.float64)
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:

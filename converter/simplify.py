@@ -60,12 +60,13 @@ def rigid_residual(frames: np.ndarray, rounds: int = 3) -> np.ndarray:
             wsum = weight.sum(axis=1, keepdims=True)[..., None]
             c_ref = (weight[..., None] * ref[None]).sum(axis=1, keepdims=True) / wsum
             c_fr = (weight[..., None] * x).sum(axis=1, keepdims=True) / wsum
-            h = np.einsum("tv,tvi,tvj->tij", weight, x - c_fr, ref[None] - c_ref)
+            xc = x - c_fr
+            h = np.swapaxes(weight[..., None] * xc, 1, 2) @ (ref[None] - c_ref)  # (T, 3, 3), matrix products
             u, _, vt = np.linalg.svd(h)
             fix = np.ones((len(x), 3))
             fix[:, 2] = np.sign(np.linalg.det(u @ vt))
-            rot = np.einsum("tij,tj,tjk->tik", u, fix, vt)  # maps centred frame points onto the reference
-            residual = np.einsum("tvi,tik->tvk", x - c_fr, rot) + c_ref - ref[None]
+            rot = (u * fix[:, None, :]) @ vt  # maps centred frame points onto the reference
+            residual = xc @ rot + c_ref - ref[None]
             r = np.linalg.norm(residual, axis=-1)
             weight = (r <= np.median(r, axis=1, keepdims=True)).astype(np.float64)
         out[s:s + FRAME_BLOCK] = residual
@@ -195,6 +196,7 @@ def budget_deviation_px(original: FaceAnimation, simplified: FaceAnimation, face
 
     Each original vertex is attached at the first frame to the closest point of the simplified mesh of its
     own part (barycentric coordinates); that point then follows the simplified animation."""
+    from scipy.sparse import csr_matrix  # noqa: PLC0415 - heavy; loaded on first use to keep start-up fast
     from scipy.spatial import cKDTree  # noqa: PLC0415 - heavy; loaded on first use to keep start-up fast
     from trimesh.triangles import closest_point, points_to_barycentric  # noqa: PLC0415 - heavy; loaded on first use to keep start-up fast
 
@@ -220,19 +222,21 @@ def budget_deviation_px(original: FaceAnimation, simplified: FaceAnimation, face
         best = cand[np.arange(len(pts)), np.argmin(dist, axis=1)]
         nearest = cp.reshape(len(pts), k, 3)[np.arange(len(pts)), np.argmin(dist, axis=1)]
         bary = points_to_barycentric(tris[best], nearest)
-        attached.append((int(p), part_ids == p, local.reshape(-1, 3), verts, sf[tri_ids[best]], bary))
+        lf = local.reshape(-1, 3)
+        incidence = csr_matrix((np.ones(lf.size, np.float32), (np.repeat(np.arange(len(lf)), 3), lf.ravel())),
+                               shape=(len(lf), len(verts)))
+        attached.append((int(p), part_ids == p, incidence, verts, sf[tri_ids[best]], bary))
     worst, total, count = 0.0, 0.0, 0
     per_part = {p: 0.0 for p, *_ in attached}
     for s in range(0, original.n_frames, FRAME_BLOCK):  # float64 projections per block of frames, not per clip
         xy0, z0, w0 = cam.project(original.frames[s:s + FRAME_BLOCK])
         visible = cull(xy0, z0, w0, faces, cam.width, cam.height)  # (B, F) original triangles shown
         xy1, _, _ = cam.project(simplified.frames[s:s + FRAME_BLOCK])
-        for p, in_part, local_faces, verts, corner, bary in attached:
-            shown = np.zeros((len(xy0), len(verts)), bool)
-            vis_p = visible[:, in_part]
-            for c in range(3):  # a vertex counts at a frame when one of its triangles is shown
-                np.logical_or.at(shown.T, local_faces[:, c], vis_p.T)
-            follow = np.einsum("nc,tncd->tnd", bary, xy1[:, corner])  # (B, n, 2)
+        for p, in_part, incidence, verts, corner, bary in attached:
+            # A vertex counts at a frame when one of its triangles is shown: (B, F) shown triangles times the
+            # (F, n) triangle-vertex incidence.
+            shown = (visible[:, in_part].astype(np.float32) @ incidence) > 0
+            follow = sum(bary[None, :, c, None] * xy1[:, corner[:, c]] for c in range(3))  # (B, n, 2)
             dev = np.where(shown, np.linalg.norm(follow - xy0[:, verts], axis=-1), 0.0)
             if dev.size:
                 per_part[p] = max(per_part[p], float(dev.max()))

@@ -133,3 +133,13 @@ def test_culling_matches_its_per_corner_definition_on_random_triangles():
     got = cull(xy, z, w, faces, size, size)
     assert 0 < expected.sum() < expected.size
     assert np.array_equal(got, expected)
+
+
+@pytest.mark.parametrize("n", [1, 5, 1023, 1024, 1025, 3 * 1024 + 7])
+def test_extent_equals_numpy_min_max(n):
+    from converter.camera import _extent
+
+    pts = np.random.default_rng(n).normal(size=(n, 3)).astype(np.float32)
+    lo, hi = _extent(pts)
+    assert lo.dtype == np.float64
+    assert np.array_equal(lo, pts.min(axis=0)) and np.array_equal(hi, pts.max(axis=0))
