@@ -264,11 +264,12 @@ def run() -> str:
         "",
         grow,
         "",
-        f"{note}ARKit-driven ICT head: the full ICT FaceKit head (26,719 vertices, 50,996 triangles, of which the "
-        "row's triangles are ever seen) driven by a generated 4,000-frame Live Link Face CSV (bench_weights' "
+        f"{note}ARKit-driven ICT head: the full ICT FaceKit head (26,719 vertices, 50,996 triangles, "
+        f"{res[ARKIT][0]['paths']:,} of them ever seen and drawn) driven by a generated 4,000-frame Live Link Face "
+        "CSV (bench_weights' "
         "`write_capture`: all 52 weights and the head and eye angles as slow sines, 60 fps), loaded as `facesvg "
         "convert ICT --weights capture.csv` loads it; its peak includes the loader's (head, capture, driven frames: "
-        f"{res[ARKIT][0]['before_mb']:,.0f} MB before converting). " if ARKIT in res else note,
+        f"{res[ARKIT][0]['before_mb']:,.0f} MB before converting)." if ARKIT in res else note,
         f"Targets (issue 16): {TARGETS}.",
     ])
 
