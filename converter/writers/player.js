@@ -14,6 +14,8 @@
   const STROKE_PX = 0.5; // the SVG's seam stroke (svg_anim.STROKE_PX)
   const SLOW_WINDOW = 30; // played frames judged together for multisampling
   const SLOW_FPS = 45; // below this median frame rate the player drops multisampling
+  const LATE_SHARE = 0.05; // ... as it does when more of the last 2 * SLOW_WINDOW frames than this came late
+  const WARM_UP = 10; // played frames not judged (the first draws upload and compile)
 
   const $ = (id) => document.getElementById(id);
   const root = $("facesvg-player");
@@ -591,7 +593,7 @@ void main() { o = v; }`;
     let antialias = autoAA || options.antialias === true;
     let renderer = pickRenderer(anim, options.renderer, antialias);
     if (!renderer) throw new Corrupt("this browser can draw neither WebGL nor canvas 2D");
-    const intervals = []; // ms between played frames, judged SLOW_WINDOW at a time
+    const intervals = []; // ms between the last 2 * SLOW_WINDOW played frames
     let lastNow = null;
 
     let time = 0; // seconds into the animation
@@ -618,20 +620,31 @@ void main() { o = v; }`;
       playButton.setAttribute("aria-pressed", on ? "true" : "false");
     }
 
-    // Multisampling costs a software-rendered or weak GPU most of its frame. When the median of SLOW_WINDOW
-    // played frames misses SLOW_FPS, the player draws on without it (a new canvas: a context keeps its
-    // attributes), once and for the rest of the page's life.
+    // Multisampling costs a software-rendered or weak GPU most of its frame. The player draws on without it (a
+    // new canvas: a context keeps its attributes), once and for the rest of the page's life, when the median of
+    // SLOW_WINDOW played frames misses SLOW_FPS, or when frames come late while the median keeps the display's
+    // pace: more than LATE_SHARE of the last 2 * SLOW_WINDOW intervals over 1.5 display frames (the shortest
+    // interval seen). A device that plays 55 of 60 frames draws every frame without it.
+    const slowFps = options.slowFps || SLOW_FPS;
+    const lateShare = options.lateShare ?? LATE_SHARE;
+    let warm = 0;
+    let shortest = Infinity;
     function watchPace(now) {
       if (!playing || !autoAA || !antialias || !renderer.gl) {
         lastNow = null;
         return;
       }
-      if (lastNow !== null) intervals.push(now - lastNow);
+      const last = lastNow;
       lastNow = now;
+      if (last === null || ++warm <= WARM_UP) return;
+      const dt = now - last;
+      shortest = Math.min(shortest, Math.max(dt, 4));
+      intervals.push(dt);
+      if (intervals.length > 2 * SLOW_WINDOW) intervals.shift();
       if (intervals.length < SLOW_WINDOW) return;
-      const median = intervals.sort((a, b) => a - b)[SLOW_WINDOW >> 1];
-      intervals.length = 0;
-      if (median * (options.slowFps || SLOW_FPS) <= 1000) return;
+      const late = intervals.reduce((n, d) => n + (d > 1.5 * shortest), 0);
+      const recent = intervals.slice(-SLOW_WINDOW).sort((a, b) => a - b)[SLOW_WINDOW >> 1];
+      if (recent * slowFps <= 1000 && late <= lateShare * 2 * SLOW_WINDOW) return;
       const before = renderer;
       const lose = before.gl.getExtension("WEBGL_lose_context");
       freshCanvas();

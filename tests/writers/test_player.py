@@ -242,12 +242,17 @@ def test_webgl2_draws_on_the_gpu_what_the_script_computes_for_webgl(browser, cas
 
 @pytest.mark.browser
 def test_late_frames_drop_multisampling_once_and_the_player_draws_on(browser, case):
-    # slowFps stands in for a slow device: with it above any frame rate every window is late; with it near zero none
-    # is. What is checked is the switch itself: a new canvas, the same renderer, the same picture, the controls.
+    # slowFps stands in for a slow device: with it above any frame rate every window is late; with it near zero and
+    # lateShare 1 none is. Stalls: a page task that blocks every 4th frame for 60 ms makes a quarter of the frames
+    # late while the median keeps the display's pace, which the late-share rule alone catches. What is checked
+    # beyond the rules is the switch itself: a new canvas, the same renderer, the same picture, the controls.
     data = case[3]
-    for slow_fps, dropped in ((1e-9, False), (1e9, True)):
+    stall = ("let k = 0; const s = () => { if (++k % 4 === 0) { const t = performance.now(); "
+             "while (performance.now() - t < 60); } requestAnimationFrame(s); }; requestAnimationFrame(s);")
+    for options, stalls, dropped in (("{slowFps: 1e-9, lateShare: 1}", False, False), ("{slowFps: 1e9}", False, True),
+                                     ("{slowFps: 1e-9}", True, True)):
         ctx = browser.new_context(viewport={"width": 400, "height": 400})
-        ctx.add_init_script(f"window.facesvgPlayerOptions = {{slowFps: {slow_fps}}}")
+        ctx.add_init_script(f"window.facesvgPlayerOptions = {options};" + (stall if stalls else ""))
         page = ctx.new_page()
         try:
             page.set_content(data.decode())
@@ -255,9 +260,9 @@ def test_late_frames_drop_multisampling_once_and_the_player_draws_on(browser, ca
                                    timeout=30_000)
             assert page.evaluate("() => [facesvgPlayer.renderer, facesvgPlayer.antialias]") == ["webgl2", True]
             before = page.evaluate_handle("() => document.getElementById('facesvg-canvas')")
-            # Two windows of played frames, counted in the page.
+            # The warm-up and two windows of played frames, counted in the page.
             page.evaluate("""() => new Promise((done) => { let n = 0;
-                const tick = () => (++n > 70 ? done() : requestAnimationFrame(tick));
+                const tick = () => (++n > 90 ? done() : requestAnimationFrame(tick));
                 requestAnimationFrame(tick); })""")
             assert page.evaluate("() => [facesvgPlayer.renderer, facesvgPlayer.antialias]") == ["webgl2", not dropped]
             assert page.evaluate("(c) => c === document.getElementById('facesvg-canvas')", before) is not dropped
