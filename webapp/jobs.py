@@ -26,7 +26,7 @@ from webapp.jobstore import (
 )
 from webapp.lease import expired, settle
 from webapp.runner import run_job
-from webapp.storage import Storage
+from webapp.storage import Storage, new_job_id
 from webapp.workers import WorkerPool
 
 log = logging.getLogger("facesvg.webapp")
@@ -176,16 +176,22 @@ class RQQueue(JobQueue):
 
     def _enqueue(self, job_id: str) -> None:
         job = self.store.get(job_id)
-        rq_id = job_id if job is None or not job.attempts else f"{job_id}-retry{job.attempts}"
+        rq_id = self._rq_id(job_id, job.attempts if job else 0)
         self.queue.enqueue(run_job, job_id, self.url, str(self.storage.root), self.preview_frames,
                            self.lease_seconds, job_id=rq_id, job_timeout=self.job_timeout, result_ttl=600,
                            failure_ttl=86400)
 
+    @staticmethod
+    def _rq_id(job_id: str, attempts: int) -> str:
+        """The RQ job id of a job's next start after `attempts` claims: each re-queue is a new RQ job."""
+        return f"{job_id}-retry{attempts}" if attempts else job_id
+
     def _dequeue(self, job_id: str) -> None:
         from rq.job import Job as RQJob  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
 
+        job = self.store.get(job_id)
         try:
-            RQJob.fetch(job_id, connection=self.connection).cancel()
+            RQJob.fetch(self._rq_id(job_id, job.attempts if job else 0), connection=self.connection).cancel()
         except Exception:  # already taken, finished or expired: the worker's claim skips cancelled jobs anyway
             pass
 
@@ -208,23 +214,38 @@ class RQQueue(JobQueue):
                 log.warning("rq reaper: %r", exc)
 
     def get(self, job_id: str) -> Job | None:
-        """The record; a queued job whose current RQ job failed before any horse claimed it (its worker died after
-        taking it from the queue, and RQ's maintenance failed it) is recorded as failed."""
+        """The record. A queued job whose current RQ job failed before any horse claimed it (its worker died after
+        taking it from the queue, and RQ's maintenance failed it) is re-queued while retries remain (the lost
+        start counts as an attempt), else recorded as failed."""
         job = self.store.get(job_id)
-        if job is not None and job.state == QUEUED:
-            from rq.exceptions import NoSuchJobError  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
-            from rq.job import Job as RQJob  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
-
-            rq_id = job_id if not job.attempts else f"{job_id}-retry{job.attempts}"  # as _enqueue names it
-            try:
-                status = RQJob.fetch(rq_id, connection=self.connection).get_status(refresh=True)
-            except NoSuchJobError:
-                status = None
-            if status is not None and str(getattr(status, "value", status)) in ("failed", "stopped"):
-                if self.store.transition(job_id, (QUEUED,), state=FAILED, stage="failed", finished=time.time(),
-                                         message="the worker could not start this job; submit it again."):
-                    job = self.store.get(job_id)
+        if job is not None and job.state == QUEUED and self._unclaimed_rq_failed(job):
+            if job.attempts + 1 <= self.retries:  # as settle() counts: the lost start is an attempt
+                self._requeue_unclaimed(job)
+            else:
+                self.store.transition(job_id, (QUEUED,), state=FAILED, stage="failed", finished=time.time(),
+                                      message="the worker could not start this job; submit it again.")
+            job = self.store.get(job_id)
         return job
+
+    def _unclaimed_rq_failed(self, job: Job) -> bool:
+        from rq.exceptions import NoSuchJobError  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
+        from rq.job import Job as RQJob  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
+
+        try:
+            status = RQJob.fetch(self._rq_id(job.id, job.attempts), connection=self.connection).get_status(refresh=True)
+        except NoSuchJobError:
+            return False
+        return str(getattr(status, "value", status)) in ("failed", "stopped")
+
+    def _requeue_unclaimed(self, job: Job) -> None:
+        # One caller wins: the queued job's empty owner is taken by a token while its attempt count moves on and
+        # its next RQ job is enqueued; a horse's claim may take it from the token at once.
+        token = f"requeue:{new_job_id()}"
+        if not self.store.transition(job.id, (QUEUED,), holder="", owner=token, attempts=job.attempts + 1,
+                                     stage="re-queued: its worker stopped before starting it"):
+            return
+        self._enqueue(job.id)
+        self.store.transition(job.id, (QUEUED,), holder=token, owner="")
 
     def close(self, wait: bool = True) -> None:
         self._stop.set()
