@@ -340,8 +340,10 @@ void main() { o = v; }`;
     }
   }
 
+  // WebGL 2 multisamples into its own renderbuffer, blitted to the canvas each frame, so that dropping
+  // multisampling is a matter of drawing to the canvas directly: no new context, no second upload.
   function webgl2Renderer(cv, anim, antialias) {
-    const gl = context(cv, "webgl2", antialias);
+    const gl = context(cv, "webgl2", false);
     if (!gl) return null;
     const { h, gouraud, pathVertices, xy, rgb, shown } = anim;
     const prog = program(gl, GL2_VS, GL2_FS);
@@ -400,17 +402,44 @@ void main() { o = v; }`;
     const fLoc = u("f");
     const wLoc = u("w");
     gl.disable(gl.DEPTH_TEST); // painter's order: later triangles cover earlier ones
+    let msaa = null; // [framebuffer, renderbuffer] while multisampling
+    const samples = Math.min(4, gl.getParameter(gl.MAX_SAMPLES));
+    if (antialias && samples > 1) {
+      const rb = gl.createRenderbuffer();
+      gl.bindRenderbuffer(gl.RENDERBUFFER, rb);
+      gl.renderbufferStorageMultisample(gl.RENDERBUFFER, samples, gl.RGBA8, cv.width, cv.height);
+      const fb = gl.createFramebuffer();
+      gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
+      gl.framebufferRenderbuffer(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.RENDERBUFFER, rb);
+      if (gl.checkFramebufferStatus(gl.FRAMEBUFFER) === gl.FRAMEBUFFER_COMPLETE) msaa = [fb, rb];
+      gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    }
     if (gl.getError() !== gl.NO_ERROR) return null;
     return {
       name: "webgl2",
       gl,
+      antialias: msaa !== null,
       frame(f, w) {
+        gl.bindFramebuffer(gl.FRAMEBUFFER, msaa ? msaa[0] : null);
         gl.viewport(0, 0, cv.width, cv.height);
         gl.clearColor(0, 0, 0, 0);
         gl.clear(gl.COLOR_BUFFER_BIT);
         gl.uniform1i(fLoc, f);
         gl.uniform1f(wLoc, w);
         gl.drawArrays(gl.TRIANGLES, 0, 3 * p);
+        if (msaa) {
+          gl.bindFramebuffer(gl.READ_FRAMEBUFFER, msaa[0]);
+          gl.bindFramebuffer(gl.DRAW_FRAMEBUFFER, null);
+          gl.blitFramebuffer(0, 0, cv.width, cv.height, 0, 0, cv.width, cv.height, gl.COLOR_BUFFER_BIT, gl.NEAREST);
+        }
+      },
+      dropAntialias() {
+        if (!msaa) return;
+        gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+        gl.deleteFramebuffer(msaa[0]);
+        gl.deleteRenderbuffer(msaa[1]);
+        msaa = null;
+        this.antialias = false;
       },
     };
   }
@@ -593,6 +622,7 @@ void main() { o = v; }`;
     let antialias = autoAA || options.antialias === true;
     let renderer = pickRenderer(anim, options.renderer, antialias);
     if (!renderer) throw new Corrupt("this browser can draw neither WebGL nor canvas 2D");
+    if (renderer.antialias === false) antialias = false; // WebGL 2 without a multisampled renderbuffer
     const intervals = []; // ms between the last 2 * SLOW_WINDOW played frames
     let lastNow = null;
 
@@ -622,9 +652,10 @@ void main() { o = v; }`;
 
     // Multisampling costs a software-rendered or weak GPU most of its frame. The player draws on without it (a
     // new canvas: a context keeps its attributes), once and for the rest of the page's life, when the median of
-    // SLOW_WINDOW played frames misses SLOW_FPS, or when frames come late while the median keeps the display's
-    // pace: more than LATE_SHARE of the last 2 * SLOW_WINDOW intervals over 1.5 display frames (the shortest
-    // interval seen). A device that plays 55 of 60 frames draws every frame without it.
+    // SLOW_WINDOW played frames misses SLOW_FPS, or as soon as frames come late while the median keeps the
+    // display's pace: more than LATE_SHARE of 2 * SLOW_WINDOW intervals over 1.5 display frames (the shortest
+    // interval seen), counted in the last 2 * SLOW_WINDOW. A device that plays 55 of 60 frames draws every frame
+    // without it; one that plays 40 drops it within about 10 frames of the warm-up.
     const slowFps = options.slowFps || SLOW_FPS;
     const lateShare = options.lateShare ?? LATE_SHARE;
     let warm = 0;
@@ -641,20 +672,24 @@ void main() { o = v; }`;
       shortest = Math.min(shortest, Math.max(dt, 4));
       intervals.push(dt);
       if (intervals.length > 2 * SLOW_WINDOW) intervals.shift();
-      if (intervals.length < SLOW_WINDOW) return;
-      const late = intervals.reduce((n, d) => n + (d > 1.5 * shortest), 0);
-      const recent = intervals.slice(-SLOW_WINDOW).sort((a, b) => a - b)[SLOW_WINDOW >> 1];
-      if (recent * slowFps <= 1000 && late <= lateShare * 2 * SLOW_WINDOW) return;
+      const late = intervals.reduce((n, d) => n + (d > 1.5 * shortest), 0) > lateShare * 2 * SLOW_WINDOW;
+      const slow = intervals.length >= SLOW_WINDOW
+        && intervals.slice(-SLOW_WINDOW).sort((a, b) => a - b)[SLOW_WINDOW >> 1] * slowFps > 1000;
+      if (!late && !slow) return;
+      antialias = false;
+      drawnTime = -1;
+      if (renderer.dropAntialias) {
+        renderer.dropAntialias();
+        return;
+      }
       const before = renderer;
       const lose = before.gl.getExtension("WEBGL_lose_context");
       freshCanvas();
       const next = pickRenderer(anim, before.name, false);
       if (!next) return; // cannot happen for a renderer that worked; keep drawing nothing rather than fail
-      antialias = false;
       renderer = next;
       api.renderer = next.name;
       if (lose) lose.loseContext();
-      drawnTime = -1;
     }
 
     function frame(now) {
