@@ -1,6 +1,6 @@
 """The occlusion pass: which triangles are ever seen, from one small integer-id render per frame.
 
-One EGL context (pyrender's EGL platform, Mesa), one program, one framebuffer (an R32UI id renderbuffer and a
+One EGL context (converter.egl, Mesa), one program, one framebuffer (an R32UI id renderbuffer and a
 depth renderbuffer, no multisampling) and one vertex buffer are made once and reused for every frame; a frame
 costs one glBufferSubData of the clip-space vertices, one draw and one glReadPixels of the ids (the depth is
 never read back). The ids are counted with np.bincount.
@@ -39,8 +39,8 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 import numpy as np
 
 from converter.camera import Camera
+from converter.egl import EGL_HELP, EglContext
 from converter.errors import RenderError
-from converter.render import EGL_HELP
 
 INRADIUS_PX = 0.5 ** 0.5  # a triangle whose inscribed circle is this wide holds a pixel centre
 SLACK = 2.0  # margin on the depth two planes of one surface can part by between the centroid and the pixel centre
@@ -58,26 +58,23 @@ void main() { id = uint(gl_PrimitiveID) + 1u; }
 
 
 def _gl():
-    """PyOpenGL's GL module and pyrender's EGL platform; RenderError names what to install when EGL is missing."""
+    """PyOpenGL's GL module; RenderError names what to install when it cannot load."""
     try:
         from OpenGL import GL  # noqa: PLC0415 - imported late so the EGL platform variable is set first
-        from pyrender.platforms.egl import EGLPlatform  # noqa: PLC0415
     except Exception as exc:  # ImportError, or PyOpenGL failing to find libEGL
         raise RenderError(f"{EGL_HELP} ({exc}).") from None
-    return GL, EGLPlatform
+    return GL
 
 
 class IdRenderer:
     """A reusable id render target: render(clip) -> (H, W) uint32 ids, 0 = background, face f = f + 1."""
 
     def __init__(self, width: int, height: int, faces: np.ndarray, n_vertices: int):
-        gl, platform_cls = _gl()
-        self.gl, self.width, self.height, self.n_vertices = gl, int(width), int(height), int(n_vertices)
+        self._context = EglContext()
+        self.width, self.height, self.n_vertices = int(width), int(height), int(n_vertices)
         self.n_indices = int(faces.size)
-        self._platform = platform_cls(self.width, self.height)
         try:
-            self._platform.init_context()
-            self._platform.make_current()
+            self.gl = _gl()
             self._build(np.ascontiguousarray(faces, np.uint32))
         except RenderError:
             self.close()
@@ -145,10 +142,7 @@ class IdRenderer:
 
     def close(self) -> None:
         """Free the GL objects and the context."""
-        try:
-            self._platform.delete_context()
-        except Exception:  # a context that never came up has nothing to free
-            pass
+        self._context.close()
 
     def __enter__(self) -> IdRenderer:
         return self

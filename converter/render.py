@@ -11,12 +11,8 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 import numpy as np
 
 from converter.camera import Camera
+from converter.egl import EGL_HELP
 from converter.errors import RenderError
-
-EGL_HELP = (
-    "offscreen rendering needs Mesa EGL; install it with "
-    "'apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1' and keep PYOPENGL_PLATFORM=egl"
-)
 
 
 def _pyrender():

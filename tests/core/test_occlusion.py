@@ -1,10 +1,13 @@
 """The occlusion pass keeps every visible triangle, however small, and drops the ones strictly behind (15.8)."""
 
+import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from conftest import SAMPLE
 from converter import idpass
 from converter.camera import Camera, look_at, orthographic
 from converter.errors import RenderError
@@ -109,9 +112,35 @@ def test_ids_are_exact_at_pixel_centres():
 
 
 def test_missing_egl_raises_render_error_naming_what_to_install(monkeypatch):
-    monkeypatch.setitem(sys.modules, "pyrender.platforms.egl", None)  # as _gl sees a machine without libEGL
-    with pytest.raises(RenderError, match="apt-get install libegl1"):
-        idpass.IdRenderer(8, 8, np.zeros((1, 3), np.int32), 3)
+    import OpenGL.platform
+
+    from converter import egl
+
+    # PyOpenGL without an EGL platform (no libEGL), then an EGL library with no usable display.
+    with monkeypatch.context() as m:
+        m.setattr(OpenGL.platform.PlatformPlugin, "by_name", classmethod(lambda cls, name: None))
+        with pytest.raises(RenderError, match="apt-get install libegl1"):
+            idpass.IdRenderer(8, 8, np.zeros((1, 3), np.int32), 3)
+    with monkeypatch.context() as m:
+        m.setattr(egl, "_display", lambda e: None)
+        with pytest.raises(RenderError, match="apt-get install libegl1.*no EGL display"):
+            idpass.IdRenderer(8, 8, np.zeros((1, 3), np.int32), 3)
+    with idpass.IdRenderer(8, 8, np.zeros((1, 3), np.int32), 3) as r:  # and a working one afterwards
+        assert r.render(np.zeros((3, 4), np.float32)).shape == (8, 8)
+
+
+def test_a_conversion_with_the_occlusion_pass_imports_neither_pyrender_nor_trimesh(tmp_path):
+    # pyrender's package (trimesh, its scene graph) cost ~0.5 s CPU and ~80 MB in every conversion when the id pass
+    # took its EGL context from it; converter.egl makes the context from PyOpenGL alone.
+    code = (
+        "import sys; import converter.convert as c; from converter.options import ConversionOptions; "
+        "r = c.convert(sys.argv[1], ConversionOptions(size=64, end=3)); "
+        "assert r.report.counts['paths'] > 0; "
+        "print(sorted(m for m in ('pyrender', 'trimesh') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code, str(SAMPLE)], capture_output=True, text=True,
+                         cwd=Path(__file__).resolve().parents[2], check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout
 
 
 def test_on_the_sample_every_pixel_owner_is_kept_and_fewer_visible_triangles_are_missed_than_before(sample_path):
