@@ -3,7 +3,7 @@
 One EGL context (converter.egl, Mesa), one program, one framebuffer (an R32UI id renderbuffer and a
 depth renderbuffer, no multisampling) and one vertex buffer are made once and reused for every frame; a frame
 costs one glBufferSubData of the clip-space vertices, one draw and one glReadPixels of the ids (the depth is
-never read back). The ids are counted with np.bincount.
+never read back). The ids mark a flag array by fancy indexing.
 
 The rule (issue 15.8), in two parts:
 
@@ -163,11 +163,14 @@ def ever_seen(frames: np.ndarray, faces: np.ndarray, camera: Camera, visible: np
     t, f = frames.shape[0], faces.shape[0]
     kept = np.zeros(f, bool)
     faces64 = faces.astype(np.int64)
+    shown = np.zeros(f + 1, bool)  # per frame: which ids own a pixel (index 0: background)
     with IdRenderer(camera.width, camera.height, faces, frames.shape[1]) as r:
         for k in range(t):
             clip = clip_coords(camera, frames[k])
             ids = r.render(clip)
-            kept |= (np.bincount(ids.ravel(), minlength=f + 1)[1:] > 0) & visible[k]
+            shown[:] = False
+            shown[ids.ravel().astype(np.intp)] = True  # 3x cheaper than np.bincount(...) > 0
+            kept |= shown[1:] & visible[k]
             cand = np.flatnonzero(visible[k] & ~kept)
             if cand.size:
                 w = clip[:, 3].astype(np.float64)
