@@ -13,7 +13,6 @@ the unsmoothed input is at most tolerance + the reported smoothing deviation.
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
 
 from converter.animation import FaceAnimation
 from converter.camera import Camera
@@ -29,6 +28,8 @@ def smooth(anim: FaceAnimation, sigma: float) -> FaceAnimation:
         raise InputError(f"smooth must be between 0 and {MAX_SIGMA:g} frames, got {sigma}.")
     if sigma == 0 or anim.n_frames < 2:
         return anim
+    from scipy.ndimage import gaussian_filter1d  # noqa: PLC0415 - ~0.1 s to import; only --smooth needs it
+
     frames = gaussian_filter1d(anim.frames.astype(np.float64), sigma, axis=0, mode="nearest")
     return anim.with_frames(frames.astype(np.float32))
 

@@ -12,7 +12,6 @@ import warnings
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
-from scipy import ndimage
 
 from converter.lighting import srgb_to_linear
 
@@ -48,6 +47,8 @@ def sample_texture(pixels: np.ndarray, uv: np.ndarray, wrap_s: int = 10497, wrap
     mode = mode_s
     if mode_s != mode_t:  # map_coordinates takes one mode: fold each axis into the image first
         x, y, mode = _wrap(x, w, mode_s), _wrap(y, h, mode_t), "nearest"
+    from scipy import ndimage  # noqa: PLC0415 - ~0.1 s to import (it parses docstrings); only textured files need it
+
     out = np.empty((len(uv), 3), np.float32)
     lut = (srgb_to_linear if decode_srgb else np.asarray)(np.arange(256, dtype=np.float32) / 255.0)
     for c in range(3):  # one channel at a time: a float copy of a large texture is 4 bytes a texel
