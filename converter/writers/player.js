@@ -402,6 +402,7 @@ void main() { o = v; }`;
     const fLoc = u("f");
     const wLoc = u("w");
     gl.disable(gl.DEPTH_TEST); // painter's order: later triangles cover earlier ones
+    if (gl.getError() !== gl.NO_ERROR) return null;
     let msaa = null; // [framebuffer, renderbuffer] while multisampling
     const samples = Math.min(4, gl.getParameter(gl.MAX_SAMPLES));
     if (antialias && samples > 1) {
@@ -411,8 +412,18 @@ void main() { o = v; }`;
       const fb = gl.createFramebuffer();
       gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
       gl.framebufferRenderbuffer(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.RENDERBUFFER, rb);
-      if (gl.checkFramebufferStatus(gl.FRAMEBUFFER) === gl.FRAMEBUFFER_COMPLETE) msaa = [fb, rb];
+      if (gl.checkFramebufferStatus(gl.FRAMEBUFFER) === gl.FRAMEBUFFER_COMPLETE) {
+        // One trial resolve: a browser whose canvas format differs from the renderbuffer's refuses the blit.
+        gl.bindFramebuffer(gl.READ_FRAMEBUFFER, fb);
+        gl.bindFramebuffer(gl.DRAW_FRAMEBUFFER, null);
+        gl.blitFramebuffer(0, 0, cv.width, cv.height, 0, 0, cv.width, cv.height, gl.COLOR_BUFFER_BIT, gl.NEAREST);
+        if (gl.getError() === gl.NO_ERROR) msaa = [fb, rb];
+      }
       gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+      if (!msaa) {
+        gl.deleteFramebuffer(fb);
+        gl.deleteRenderbuffer(rb);
+      }
     }
     if (gl.getError() !== gl.NO_ERROR) return null;
     return {
@@ -650,8 +661,9 @@ void main() { o = v; }`;
       playButton.setAttribute("aria-pressed", on ? "true" : "false");
     }
 
-    // Multisampling costs a software-rendered or weak GPU most of its frame. The player draws on without it (a
-    // new canvas: a context keeps its attributes), once and for the rest of the page's life, when the median of
+    // Multisampling costs a software-rendered or weak GPU most of its frame. The player draws on without it (WebGL
+    // 2: straight to the canvas; WebGL 1: on a new canvas, as a context keeps its attributes), once and for the
+    // rest of the page's life, when the median of
     // SLOW_WINDOW played frames misses SLOW_FPS, or as soon as frames come late while the median keeps the
     // display's pace: more than LATE_SHARE of 2 * SLOW_WINDOW intervals over 1.5 display frames (the shortest
     // interval seen), counted in the last 2 * SLOW_WINDOW. A device that plays 55 of 60 frames draws every frame
