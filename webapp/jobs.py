@@ -26,7 +26,7 @@ from webapp.jobstore import (
 )
 from webapp.lease import expired, settle
 from webapp.runner import run_job
-from webapp.storage import Storage, new_job_id
+from webapp.storage import Storage
 from webapp.workers import WorkerPool
 
 log = logging.getLogger("facesvg.webapp")
@@ -238,14 +238,12 @@ class RQQueue(JobQueue):
         return str(getattr(status, "value", status)) in ("failed", "stopped")
 
     def _requeue_unclaimed(self, job: Job) -> None:
-        # One caller wins: the queued job's empty owner is taken by a token while its attempt count moves on and
-        # its next RQ job is enqueued; a horse's claim may take it from the token at once.
-        token = f"requeue:{new_job_id()}"
-        if not self.store.transition(job.id, (QUEUED,), holder="", owner=token, attempts=job.attempts + 1,
-                                     stage="re-queued: its worker stopped before starting it"):
-            return
-        self._enqueue(job.id)
-        self.store.transition(job.id, (QUEUED,), holder=token, owner="")
+        # One reader wins: the conditional write takes the owner field this reader saw (empty, or the mark of the
+        # last such re-queue) and leaves a mark naming the new attempt, so a reader holding an older copy of the
+        # record cannot re-queue it again. A horse's claim overwrites the mark.
+        if self.store.transition(job.id, (QUEUED,), holder=job.owner, owner=f"requeued:{job.attempts + 1}",
+                                 attempts=job.attempts + 1, stage="re-queued: its worker stopped before starting it"):
+            self._enqueue(job.id)
 
     def close(self, wait: bool = True) -> None:
         self._stop.set()
