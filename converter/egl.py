@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import ctypes
 import os
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
@@ -65,18 +67,26 @@ def _display(egl):
             os.environ["DISPLAY"] = saved
 
 
+@contextmanager
+def render_errors(cleanup: Callable[[], None]) -> Iterator[None]:
+    """Run the block; on any failure run cleanup() and raise a RenderError that names what to install."""
+    try:
+        yield
+    except RenderError:
+        cleanup()
+        raise
+    except Exception as exc:  # ImportError, PyOpenGL failing to find libEGL, a driver refusing a call
+        cleanup()
+        raise RenderError(f"{EGL_HELP} ({type(exc).__name__}: {exc}).") from None
+
+
 class EglContext:
     """An OpenGL 4.1 core context, current on the calling thread from creation until close()."""
 
     def __init__(self) -> None:
-        try:
-            egl = _egl()
-        except RenderError:
-            raise
-        except Exception as exc:  # ImportError, or PyOpenGL failing to find libEGL
-            raise RenderError(f"{EGL_HELP} ({exc}).") from None
-        self._egl, self._display, self._context = egl, None, None
-        try:
+        self._egl = self._display = self._context = None
+        with render_errors(self.close):
+            self._egl = egl = _egl()
             self._display = _display(egl)
             major, minor = egl.EGLint(), egl.EGLint()
             if not self._display or not egl.eglInitialize(self._display, ctypes.byref(major), ctypes.byref(minor)):
@@ -98,21 +108,15 @@ class EglContext:
                 raise RenderError(f"{EGL_HELP} (the EGL driver could not create an OpenGL 4.1 context).")
             if not egl.eglMakeCurrent(self._display, egl.EGL_NO_SURFACE, egl.EGL_NO_SURFACE, self._context):
                 raise RenderError(f"{EGL_HELP} (the OpenGL context could not be made current).")
-        except RenderError:
-            self.close()
-            raise
-        except Exception as exc:
-            self.close()
-            raise RenderError(f"{EGL_HELP} ({type(exc).__name__}: {exc}).") from None
 
     def close(self) -> None:
         """Release the context and the display (safe to call twice, or after a failed start)."""
         egl = self._egl
         try:
-            if self._context:
+            if egl is not None and self._context:
                 egl.eglMakeCurrent(self._display, egl.EGL_NO_SURFACE, egl.EGL_NO_SURFACE, egl.EGL_NO_CONTEXT)
                 egl.eglDestroyContext(self._display, self._context)
-            if self._display:
+            if egl is not None and self._display:
                 egl.eglTerminate(self._display)
         except Exception:  # a context that never came up has nothing to free
             pass

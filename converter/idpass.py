@@ -39,7 +39,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 import numpy as np
 
 from converter.camera import Camera
-from converter.egl import EGL_HELP, EglContext
+from converter.egl import EglContext, render_errors
 from converter.errors import RenderError
 
 INRADIUS_PX = 0.5 ** 0.5  # a triangle whose inscribed circle is this wide holds a pixel centre
@@ -58,11 +58,9 @@ void main() { id = uint(gl_PrimitiveID) + 1u; }
 
 
 def _gl():
-    """PyOpenGL's GL module; RenderError names what to install when it cannot load."""
-    try:
-        from OpenGL import GL  # noqa: PLC0415 - imported late so the EGL platform variable is set first
-    except Exception as exc:  # ImportError, or PyOpenGL failing to find libEGL
-        raise RenderError(f"{EGL_HELP} ({exc}).") from None
+    """PyOpenGL's GL module (callers turn its import errors into RenderError with egl.render_errors)."""
+    from OpenGL import GL  # noqa: PLC0415 - imported late so the EGL platform variable is set first
+
     return GL
 
 
@@ -73,15 +71,9 @@ class IdRenderer:
         self._context = EglContext()
         self.width, self.height, self.n_vertices = int(width), int(height), int(n_vertices)
         self.n_indices = int(faces.size)
-        try:
+        with render_errors(self.close):
             self.gl = _gl()
             self._build(np.ascontiguousarray(faces, np.uint32))
-        except RenderError:
-            self.close()
-            raise
-        except Exception as exc:
-            self.close()
-            raise RenderError(f"{EGL_HELP} ({type(exc).__name__}: {exc}).") from None
 
     def _build(self, faces: np.ndarray) -> None:
         gl = self.gl

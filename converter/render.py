@@ -11,15 +11,12 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 import numpy as np
 
 from converter.camera import Camera
-from converter.egl import EGL_HELP
-from converter.errors import RenderError
+from converter.egl import render_errors
 
 
 def _pyrender():
-    try:
+    with render_errors(lambda: None):
         import pyrender  # noqa: PLC0415 - imported late so the EGL platform variable is set first
-    except Exception as exc:  # ImportError, or PyOpenGL failing to find libEGL
-        raise RenderError(f"{EGL_HELP} ({exc}).") from None
     return pyrender
 
 
@@ -40,10 +37,8 @@ class _MatrixCamera:
 def offscreen(width: int, height: int) -> Iterator[object]:
     """An OffscreenRenderer, deleted afterwards; RenderError names what to install when EGL is missing."""
     pyrender = _pyrender()
-    try:
+    with render_errors(lambda: None):
         renderer = pyrender.OffscreenRenderer(width, height)
-    except Exception as exc:
-        raise RenderError(f"{EGL_HELP} ({type(exc).__name__}: {exc}).") from None
     try:
         yield renderer
     finally:
