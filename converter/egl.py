@@ -31,8 +31,9 @@ def _egl():
     plugin = OpenGL.platform.PlatformPlugin.by_name("egl")
     if plugin is None:
         raise RenderError(f"{EGL_HELP} (PyOpenGL has no EGL platform).")
-    if not isinstance(OpenGL.platform.PLATFORM, plugin.load()):
-        plugin.load()().install(vars(OpenGL.platform))
+    platform_cls = plugin.load()
+    if not isinstance(OpenGL.platform.PLATFORM, platform_cls):
+        platform_cls().install(vars(OpenGL.platform))
         plugin.loaded = True
     from OpenGL import EGL  # noqa: PLC0415
 
@@ -92,10 +93,10 @@ class EglContext:
             if not self._display or not egl.eglInitialize(self._display, ctypes.byref(major), ctypes.byref(minor)):
                 raise RenderError(f"{EGL_HELP} (no EGL display could be initialised).")
             configs, count = (egl.EGLConfig * 1)(), egl.EGLint()
-            attributes = (egl.EGLint * 15)(
+            attributes = (egl.EGLint * 13)(  # no depth: the id pass renders into its own framebuffer
                 egl.EGL_SURFACE_TYPE, egl.EGL_PBUFFER_BIT, egl.EGL_RED_SIZE, 8, egl.EGL_GREEN_SIZE, 8,
                 egl.EGL_BLUE_SIZE, 8, egl.EGL_RENDERABLE_TYPE, egl.EGL_OPENGL_BIT, egl.EGL_CONFORMANT,
-                egl.EGL_OPENGL_BIT, egl.EGL_NONE, 0, 0)
+                egl.EGL_OPENGL_BIT, egl.EGL_NONE)
             if not egl.eglChooseConfig(self._display, attributes, configs, 1, ctypes.byref(count)) or count.value < 1:
                 raise RenderError(f"{EGL_HELP} (the EGL driver offers no desktop OpenGL configuration).")
             if not egl.eglBindAPI(egl.EGL_OPENGL_API):
