@@ -90,14 +90,11 @@ def extract(
         kept = visible.any(axis=0)
     progress("shade", 0.75)
     vertex_colors = vertex_colors or bool(reference_frames)  # the reference renders are Gouraud-shaded
-    # Only kept triangles are shaded: no writer reads the others, which stay 0, and zeroed pages that are never
-    # written take no memory (most of a head's back on a long capture: the ICT head keeps 27k of 51k triangles).
-    shaded = np.flatnonzero(kept)
-    face_rgb = np.zeros((t, f, 3), np.float32)
+    face_rgb = np.empty((t, f, 3), np.float32)
     vertex_rgb = np.empty((t, v, 3), np.float32) if vertex_colors else None
-    tri_rgb, vert_base = anim.triangle_colors()[shaded][None], anim.face_base_colors()[None]
+    tri_rgb, vert_base = anim.triangle_colors()[None], anim.face_base_colors()[None]
     for blk in _blocks(t):
-        face_rgb[blk, shaded] = lambert(face_normals(frames[blk], faces[shaded]), tri_rgb, camera.view, lighting)
+        face_rgb[blk] = lambert(face_normals(frames[blk], faces), tri_rgb, camera.view, lighting)
         if vertex_rgb is not None:
             vertex_rgb[blk] = lambert(vertex_normals(frames[blk], faces), vert_base, camera.view, lighting)
     _, neutral_z, _ = camera.project(frames[neutral:neutral + 1])  # float64: the order must not see rounding

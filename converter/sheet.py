@@ -21,7 +21,7 @@ class Sheet:
     visible: np.ndarray  # bool (T, F) frustum + back-face culling, per frame
     kept: np.ndarray  # bool (F,) triangles seen in at least one frame (occlusion pass), else visible.any(0)
     order: np.ndarray  # int32 (K,) kept triangle ids, back to front
-    face_rgb: np.ndarray  # float32 (T, F, 3) flat Lambert colour, display values 0..1; 0 where not kept
+    face_rgb: np.ndarray  # float32 (T, F, 3) flat Lambert colour, display values 0..1
     vertex_rgb: np.ndarray | None  # float32 (T, V, 3) lit per-vertex colour for Gouraud, 0..1; None when flat
     part_ids: np.ndarray  # int32 (F,)
     part_names: tuple[str, ...]

@@ -169,18 +169,3 @@ def test_on_the_sample_every_pixel_owner_is_kept_and_fewer_visible_triangles_are
             owns_centre |= (np.bincount(ids[s // 2::s, s // 2::s].ravel(), minlength=f + 1)[1:] > 0) & vis[k]
     assert not (owns_centre & ~new).any()
     assert (seen_fine & ~new).sum() <= (seen_fine & ~old).sum()
-
-
-def test_only_kept_triangles_are_shaded_and_their_colours_are_the_full_shading(sample_path):
-    # The Sheet shades kept triangles only (never-kept ones stay 0, their zeroed pages unwritten); a kept
-    # triangle's colour must equal what shading every triangle gives, to the bit.
-    from converter import extract, formats
-    from converter.animation import face_normals
-    from converter.lighting import lambert
-
-    anim = formats.load(sample_path).sliced(0, 6)
-    sheet = extract.extract(anim, extract.fit_camera(anim, 128), vertex_colors=False)
-    full = lambert(face_normals(anim.frames, anim.faces), anim.triangle_colors()[None], sheet.camera.view)
-    assert 0 < sheet.kept.sum() < anim.n_faces
-    assert np.array_equal(sheet.face_rgb[:, sheet.kept], full[:, sheet.kept])
-    assert not sheet.face_rgb[:, ~sheet.kept].any()
