@@ -404,6 +404,12 @@ void main() { o = v; }`;
     gl.disable(gl.DEPTH_TEST); // painter's order: later triangles cover earlier ones
     if (gl.getError() !== gl.NO_ERROR) return null;
     let msaa = null; // [framebuffer, renderbuffer] while multisampling
+    // The multisampled framebuffer fb resolved onto the canvas.
+    function resolve(fb) {
+      gl.bindFramebuffer(gl.READ_FRAMEBUFFER, fb);
+      gl.bindFramebuffer(gl.DRAW_FRAMEBUFFER, null);
+      gl.blitFramebuffer(0, 0, cv.width, cv.height, 0, 0, cv.width, cv.height, gl.COLOR_BUFFER_BIT, gl.NEAREST);
+    }
     const samples = Math.min(4, gl.getParameter(gl.MAX_SAMPLES));
     if (antialias && samples > 1) {
       const rb = gl.createRenderbuffer();
@@ -414,9 +420,7 @@ void main() { o = v; }`;
       gl.framebufferRenderbuffer(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.RENDERBUFFER, rb);
       if (gl.checkFramebufferStatus(gl.FRAMEBUFFER) === gl.FRAMEBUFFER_COMPLETE) {
         // One trial resolve: a browser whose canvas format differs from the renderbuffer's refuses the blit.
-        gl.bindFramebuffer(gl.READ_FRAMEBUFFER, fb);
-        gl.bindFramebuffer(gl.DRAW_FRAMEBUFFER, null);
-        gl.blitFramebuffer(0, 0, cv.width, cv.height, 0, 0, cv.width, cv.height, gl.COLOR_BUFFER_BIT, gl.NEAREST);
+        resolve(fb);
         if (gl.getError() === gl.NO_ERROR) msaa = [fb, rb];
       }
       gl.bindFramebuffer(gl.FRAMEBUFFER, null);
@@ -439,9 +443,7 @@ void main() { o = v; }`;
         gl.uniform1f(wLoc, w);
         gl.drawArrays(gl.TRIANGLES, 0, 3 * p);
         if (msaa) {
-          gl.bindFramebuffer(gl.READ_FRAMEBUFFER, msaa[0]);
-          gl.bindFramebuffer(gl.DRAW_FRAMEBUFFER, null);
-          gl.blitFramebuffer(0, 0, cv.width, cv.height, 0, 0, cv.width, cv.height, gl.COLOR_BUFFER_BIT, gl.NEAREST);
+          resolve(msaa[0]);
         }
       },
       dropAntialias() {
