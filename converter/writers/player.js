@@ -16,6 +16,8 @@
   const SLOW_FPS = 45; // below this median frame rate the player drops multisampling
   const LATE_SHARE = 0.05; // ... as it does when more of the last 2 * SLOW_WINDOW frames than this came late
   const WARM_UP = 10; // played frames not judged (the first draws upload and compile)
+  const MSAA_BUDGET_MS = 8; // a multisampled frame that takes longer (half a 60 Hz frame) starts the player without
+  const PROBES = 3; // timed multisampled draws at start (after one that compiles), their median judged
 
   const $ = (id) => document.getElementById(id);
   const root = $("facesvg-player");
@@ -342,7 +344,9 @@ void main() { o = v; }`;
 
   // WebGL 2 multisamples into its own renderbuffer, blitted to the canvas each frame, so that dropping
   // multisampling is a matter of drawing to the canvas directly: no new context, no second upload.
-  function webgl2Renderer(cv, anim, antialias) {
+  // With a finite budgetMs, multisampling is kept only when the median of PROBES timed multisampled frames (each
+  // drawn, resolved and waited for with a one-pixel read) takes at most budgetMs.
+  function webgl2Renderer(cv, anim, antialias, budgetMs) {
     const gl = context(cv, "webgl2", false);
     if (!gl) return null;
     const { h, gouraud, pathVertices, xy, rgb, shown } = anim;
@@ -430,28 +434,46 @@ void main() { o = v; }`;
       }
     }
     if (gl.getError() !== gl.NO_ERROR) return null;
+    // ms of one multisampled frame 0, drawn and finished: the median of PROBES after one that compiles.
+    function probe() {
+      const px = new Uint8Array(4);
+      const times = [];
+      for (let i = 0; i <= PROBES; i++) {
+        const t0 = performance.now();
+        frame(0, 0);
+        gl.bindFramebuffer(gl.FRAMEBUFFER, null); // read the resolved canvas (a multisampled one cannot be read)
+        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+        if (i) times.push(performance.now() - t0);
+      }
+      return times.sort((a, b) => a - b)[PROBES >> 1];
+    }
+    function frame(f, w) {
+      gl.bindFramebuffer(gl.FRAMEBUFFER, msaa ? msaa[0] : null);
+      gl.viewport(0, 0, cv.width, cv.height);
+      gl.clearColor(0, 0, 0, 0);
+      gl.clear(gl.COLOR_BUFFER_BIT);
+      gl.uniform1i(fLoc, f);
+      gl.uniform1f(wLoc, w);
+      gl.drawArrays(gl.TRIANGLES, 0, 3 * p);
+      if (msaa) resolve(msaa[0]);
+    }
+    function dropMsaa() {
+      if (!msaa) return;
+      gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+      gl.deleteFramebuffer(msaa[0]);
+      gl.deleteRenderbuffer(msaa[1]);
+      msaa = null;
+    }
+    const probeMs = msaa && Number.isFinite(budgetMs) ? probe() : null;
+    if (probeMs !== null && probeMs > budgetMs) dropMsaa();
     return {
       name: "webgl2",
       gl,
       antialias: msaa !== null,
-      frame(f, w) {
-        gl.bindFramebuffer(gl.FRAMEBUFFER, msaa ? msaa[0] : null);
-        gl.viewport(0, 0, cv.width, cv.height);
-        gl.clearColor(0, 0, 0, 0);
-        gl.clear(gl.COLOR_BUFFER_BIT);
-        gl.uniform1i(fLoc, f);
-        gl.uniform1f(wLoc, w);
-        gl.drawArrays(gl.TRIANGLES, 0, 3 * p);
-        if (msaa) {
-          resolve(msaa[0]);
-        }
-      },
+      probeMs,
+      frame,
       dropAntialias() {
-        if (!msaa) return;
-        gl.bindFramebuffer(gl.FRAMEBUFFER, null);
-        gl.deleteFramebuffer(msaa[0]);
-        gl.deleteRenderbuffer(msaa[1]);
-        msaa = null;
+        dropMsaa();
         this.antialias = false;
       },
     };
@@ -599,14 +621,14 @@ void main() { o = v; }`;
   }
 
   // The first renderer that works, from `wanted` ("webgl2", "webgl" or "canvas2d") down; WebGL multisampled when
-  // antialias is set.
-  function pickRenderer(anim, wanted, antialias) {
+  // antialias is set (WebGL 2: while a multisampled frame takes at most budgetMs, see webgl2Renderer).
+  function pickRenderer(anim, wanted, antialias, budgetMs = Infinity) {
     const { h } = anim;
     const order = ["webgl2", "webgl", "canvas2d"];
     for (const name of order.slice(Math.max(0, order.indexOf(wanted)))) {
       let r = null;
       if (name === "webgl2") {
-        r = webgl2Renderer(canvas, anim, antialias);
+        r = webgl2Renderer(canvas, anim, antialias, budgetMs);
       } else if (name === "webgl") {
         const gl1 = webglRenderer(canvas, h.width, h.height, antialias);
         r = gl1 && { name, frame: cpuFrames(anim, gl1.draw, true), gl: gl1.gl };
@@ -629,11 +651,13 @@ void main() { o = v; }`;
     canvas.height = Math.round(h.height * dpr);
     canvas.style.width = h.width + "px";
     // facesvgPlayerOptions (tests, comparisons): renderer ("webgl" or "canvas2d") starts lower down the list;
-    // antialias true or false pins WebGL's multisampling, which is otherwise dropped when frames come late.
+    // antialias true or false pins WebGL's multisampling, which is otherwise left out from the start when a
+    // multisampled frame takes over msaaBudgetMs (WebGL 2) and dropped when frames come late.
     const options = window.facesvgPlayerOptions || {};
     const autoAA = options.antialias === undefined || options.antialias === "auto";
     let antialias = autoAA || options.antialias === true;
-    let renderer = pickRenderer(anim, options.renderer, antialias);
+    const budgetMs = autoAA ? options.msaaBudgetMs ?? MSAA_BUDGET_MS : Infinity;
+    let renderer = pickRenderer(anim, options.renderer, antialias, budgetMs);
     if (!renderer) throw new Corrupt("this browser can draw neither WebGL nor canvas 2D");
     if (renderer.antialias === false) antialias = false; // WebGL 2 without a multisampled renderbuffer
     const intervals = []; // ms between the last 2 * SLOW_WINDOW played frames
@@ -663,7 +687,9 @@ void main() { o = v; }`;
       playButton.setAttribute("aria-pressed", on ? "true" : "false");
     }
 
-    // Multisampling costs a software-rendered or weak GPU most of its frame. The player draws on without it (WebGL
+    // Multisampling costs a software-rendered or weak GPU most of its frame. WebGL 2 times it before the first
+    // frame (webgl2Renderer's probe) and starts without it when it takes over half a 60 Hz frame. Later, the
+    // player draws on without it (WebGL
     // 2: straight to the canvas; WebGL 1: on a new canvas, as a context keeps its attributes), once and for the
     // rest of the page's life, when the median of
     // SLOW_WINDOW played frames misses SLOW_FPS, or as soon as frames come late while the median keeps the
@@ -754,6 +780,7 @@ void main() { o = v; }`;
     });
     Object.assign(api, {
       state: "ready", renderer: renderer.name, frames: h.frames, fps: h.fps, duration,
+      msaaProbeMs: renderer.probeMs ?? null, // the start-up probe's multisampled frame, ms (WebGL 2, auto)
       seek(t) { setPlaying(false); seek(t); },
       play() { setPlaying(true); },
       pause() { setPlaying(false); },

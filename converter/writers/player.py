@@ -18,8 +18,9 @@ compact binary block and plays it with a small script (converter/writers/player.
 Frame k shows at t = k / fps; between frames the player interpolates linearly, as SMIL does; the last key
 of every track sits at frame T, the loop end. The SVG's band transforms inside the head are not used.
 The script expands the keys once; with WebGL 2 the vertex shader evaluates each frame from textures of them
-(WebGL 1 and canvas 2D, the fallbacks, get each frame's corners from the script), and multisampling is dropped
-when frames come late (player.js, watchPace).
+(WebGL 1 and canvas 2D, the fallbacks, get each frame's corners from the script). WebGL 2 times a multisampled
+frame before the first one and starts without multisampling when it takes over 8 ms (half a 60 Hz frame:
+software rendering, a weak GPU); multisampling is also dropped when frames come late (player.js, watchPace).
 
 Binary block (little-endian), deflated (zlib, level 9) and base64 in the HTML:
 header (HEADER) then the sections in ``encode``'s order, each as byte planes (_section) padded to 4 bytes; key

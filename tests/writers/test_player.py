@@ -243,14 +243,16 @@ def test_webgl2_draws_on_the_gpu_what_the_script_computes_for_webgl(browser, cas
 @pytest.mark.browser
 def test_late_frames_drop_multisampling_once_and_the_player_draws_on(browser, case):
     # slowFps stands in for a slow device: with it above any frame rate every window is late; with it near zero and
-    # lateShare 1 none is. Stalls: a page task that blocks every 4th frame for 60 ms makes a quarter of the frames
-    # late while the median keeps the display's pace, which the late-share rule alone catches. What is checked
-    # beyond the rules is the switch itself: the same canvas and renderer, the same picture, the controls.
+    # lateShare 1 none is. msaaBudgetMs 1e9: the start-up probe keeps multisampling whatever this machine
+    # measures. Stalls: a page task that blocks every 4th frame for 60 ms makes a quarter of the frames late while
+    # the median keeps the display's pace, which the late-share rule alone catches. What is checked beyond the
+    # rules is the switch itself: the same canvas and renderer, the same picture, the controls.
     data = case[3]
     stall = ("let k = 0; const s = () => { if (++k % 4 === 0) { const t = performance.now(); "
              "while (performance.now() - t < 60); } requestAnimationFrame(s); }; requestAnimationFrame(s);")
-    for options, stalls, dropped in (("{slowFps: 1e-9, lateShare: 1}", False, False), ("{slowFps: 1e9}", False, True),
-                                     ("{slowFps: 1e-9}", True, True)):
+    for options, stalls, dropped in (("{slowFps: 1e-9, lateShare: 1, msaaBudgetMs: 1e9}", False, False),
+                                     ("{slowFps: 1e9, msaaBudgetMs: 1e9}", False, True),
+                                     ("{slowFps: 1e-9, msaaBudgetMs: 1e9}", True, True)):
         ctx = browser.new_context(viewport={"width": 400, "height": 400})
         ctx.add_init_script(f"window.facesvgPlayerOptions = {options};" + (stall if stalls else ""))
         page = ctx.new_page()
@@ -351,5 +353,47 @@ def test_a_damaged_block_shows_a_message(browser, case, damage):
         text = page.inner_text("#facesvg-message")
         assert text.startswith("This animation cannot be played") and "Regenerate" in text, text
         assert page.evaluate("() => facesvgPlayer.state") == "error" and page.is_hidden("#facesvg-canvas")
+    finally:
+        ctx.close()
+
+
+@pytest.mark.browser
+def test_a_slow_multisampled_frame_at_start_starts_the_player_without_multisampling(browser, case):
+    # The probe times multisampled frames before the first one is shown, each finished by a one-pixel read of the
+    # canvas. A slow device is stood in for by a read that takes 20 ms (over the default 8 ms budget); a fast one
+    # by msaaBudgetMs 1e9. The wrapped read also records GL errors: a read from the multisampled buffer fails
+    # at once (INVALID_OPERATION) and would time nothing. Either way the player starts on the same WebGL 2 canvas,
+    # drawing the same picture, aliased or not.
+    data = case[3]
+    slow_read = ("const read = WebGL2RenderingContext.prototype.readPixels; window.readErrors = [];"
+                 "WebGL2RenderingContext.prototype.readPixels = function (...a) {"
+                 "  const t = performance.now(); while (performance.now() - t < 20);"
+                 "  read.apply(this, a); window.readErrors.push(this.getError()); };")
+    frames, probes = {}, {}
+    for slow, init in ((True, slow_read), (False, "window.facesvgPlayerOptions = {msaaBudgetMs: 1e9};")):
+        ctx = browser.new_context(viewport={"width": 400, "height": 400})
+        ctx.add_init_script(init)
+        page = ctx.new_page()
+        try:
+            page.set_content(data.decode())
+            page.wait_for_function("() => window.facesvgPlayer && window.facesvgPlayer.state === 'ready'",
+                                   timeout=30_000)
+            renderer, antialias, probes[slow] = page.evaluate(
+                "() => [facesvgPlayer.renderer, facesvgPlayer.antialias, facesvgPlayer.msaaProbeMs]")
+            assert (renderer, antialias) == ("webgl2", not slow), probes
+            assert page.locator("canvas").count() == 1
+            if slow:
+                assert probes[slow] >= 20
+                assert page.evaluate("() => window.readErrors") == [0] * 4  # the warm-up read and PROBES = 3
+            page.evaluate("() => facesvgPlayer.pause()")
+            frames[slow] = _player_frames(page, (0.37,))[0]
+        finally:
+            ctx.close()
+    assert probes[False] > 0
+    score = structural_similarity(frames[True], frames[False], channel_axis=2, data_range=255)
+    assert 0.94 <= score < 0.995, f"SSIM {score:.3f} between the aliased and the multisampled start"
+    ctx, page = _open(browser, data)  # antialias pinned: no probe
+    try:
+        assert page.evaluate("() => facesvgPlayer.msaaProbeMs") is None
     finally:
         ctx.close()
