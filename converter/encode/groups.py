@@ -55,6 +55,7 @@ from converter.encode import keys as keyframes
 from converter.encode.budget import ErrorBudget
 from converter.encode.order import greedy_order
 from converter.encode.overlap import overlap_pairs
+from converter.encode.robust_affine import fit_affine
 
 HEAD_CLUSTERS = 24  # motion clusters of the largest band (the head)
 CLUSTER_MIN_TRIANGLES = 50  # fewer clusters on small heads: at least this many triangles each
@@ -65,8 +66,6 @@ SMALL_BAND_TRIANGLES, SMALL_BAND_SHARE = 100, 0.02  # pieces below max(these) ne
 MERGE_PX = 1.5  # a piece whose motion a larger band explains this well (px, 95th percentile) joins it
 HEAD_SHARE = 0.1  # px the head transform's keyframing may leave to the residual, as a share of the tolerance
 BAND_SHARE = 0.3  # the same for each band's transform inside the head's (smooth there, and repeated per run)
-HUBER_PX = 1.0  # scale of the robust (Cauchy) weights in the affine fit
-FIT_ITERATIONS = 3
 EVERY_FRAME_SHARE = 0.8  # when keyframing keeps more frames than this share, write every frame (no keyTimes)
 PLAIN_SAMPLE = 4  # the plain key count that decides whether groups pay is estimated on every 16th path, then
 PLAIN_MARGIN = 0.25  # on every 4th when the first estimate is within this share of the grouped cost
@@ -186,7 +185,7 @@ def merge_by_motion(piece: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutra
             out[piece == pid] = bands[int(np.argmin(errors))][0]
             continue
         centre = ref.mean(axis=0)
-        bands.append((pid, fit_affine(ref - centre, xy[:, verts]), centre))
+        bands.append((pid, fit_affine(ref - centre, xy, verts), centre))
     return out
 
 
@@ -207,7 +206,7 @@ def motion_clusters(band: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutral
     verts, pos = np.unique(faces[sel], return_inverse=True)
     ref = xy[neutral, verts]
     center = ref.mean(axis=0)
-    fit = fit_affine(ref - center, xy[:, verts])
+    fit = fit_affine(ref - center, xy, verts)
     res = xy[:, verts] - (apply_linear(fit[:, :, :2], ref - center) + fit[:, None, :, 2])
     if np.percentile(np.linalg.norm(res - res.mean(axis=0), axis=-1), 95) <= MERGE_PX:
         return out  # the head moves rigidly: one band explains it
@@ -244,27 +243,6 @@ def apply_linear(lin: np.ndarray, pts: np.ndarray) -> np.ndarray:
         return pts[None] @ lin_t
     t = pts.shape[0]
     return (pts.reshape(t, -1, 2) @ lin_t).reshape(pts.shape)
-
-
-def fit_affine(ref: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    """Per frame the 2x3 affine map (T, 2, 3) taking ref (n, 2) closest to xy (T, n, 2), robust to local motion."""
-    t, n = xy.shape[:2]
-    if n < 3 or np.linalg.matrix_rank(ref - ref.mean(0), tol=1e-6) < 2:
-        out = np.zeros((t, 2, 3))
-        out[:, 0, 0] = out[:, 1, 1] = 1.0
-        out[:, :, 2] = xy.mean(axis=1) - ref.mean(axis=0)
-        return out
-    d = np.c_[ref, np.ones(n)]  # (n, 3)
-    dd = (d[:, :, None] * d[:, None, :]).reshape(n, 9)
-    w = np.ones((t, n))
-    for _ in range(FIT_ITERATIONS):
-        m = (w @ dd).reshape(t, 3, 3)  # weighted normal equations per frame (matrix products, not einsum: faster)
-        b = d.T @ (w[:, :, None] * xy)
-        sol = np.linalg.solve(m + 1e-9 * np.eye(3), b)  # (T, 3, 2)
-        diff = d @ sol - xy
-        r = np.sqrt(diff[..., 0] ** 2 + diff[..., 1] ** 2)
-        w = 1.0 / (1.0 + (r / HUBER_PX) ** 2)  # Cauchy weights: moving lips and jaw barely pull the fit
-    return np.swapaxes(sol, 1, 2)
 
 
 def decompose(a: np.ndarray, center: np.ndarray) -> np.ndarray:
@@ -435,7 +413,7 @@ def _motions(xy: np.ndarray, vert_sets: list[np.ndarray], neutral: int, slack: f
         ref = xy[neutral, verts]
         center = ref.mean(axis=0)
         radius = float(np.linalg.norm(ref - center, axis=1).max()) if len(verts) else 1.0
-        fits.append((decompose(fit_affine(ref - center, xy[:, verts]), np.zeros(2)), center, radius))
+        fits.append((decompose(fit_affine(ref - center, xy, verts), np.zeros(2)), center, radius))
     if not fits:
         return []
     t, g = xy.shape[0], len(STACK)

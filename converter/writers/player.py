@@ -42,7 +42,7 @@ from importlib import resources
 import numpy as np
 from scipy import sparse
 
-from converter.encode import freeknots, groups
+from converter.encode import freeknots, groups, robust_affine
 from converter.encode import keys as keyframes
 from converter.encode.budget import ErrorBudget
 from converter.encode.order import draw_list
@@ -148,12 +148,12 @@ def _changes(active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _head(sheet: Sheet, tris: np.ndarray, local: np.ndarray, xy: np.ndarray,
           budget: ErrorBudget) -> tuple[np.ndarray, np.ndarray, float] | None:
     """The head transform: per frame the affine map of the largest part from the neutral frame
-    (groups.fit_affine, float32 as stored; frame T repeats frame T-1), the vertices (T, V, 2) in its frame, and
+    (robust_affine.fit_affine, float32 as stored; frame T repeats frame T-1), the vertices (T, V, 2) in its frame, and
     the radius their keys may use: the map magnifies a local error by at most its largest singular value.
     None when a frame's map is (nearly) singular."""
     part = sheet.part_ids[tris]
     skin = np.unique(local[part == np.bincount(part).argmax()])
-    fit = groups.fit_affine(xy[sheet.neutral, skin], xy[:, skin])
+    fit = robust_affine.fit_affine(xy[sheet.neutral, skin], xy, skin)
     mats = np.concatenate([fit, fit[-1:]]).astype(np.float32)
     a = mats[:-1].astype(np.float64)
     det = np.linalg.det(a[:, :, :2])

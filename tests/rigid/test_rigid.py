@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from converter import verify
-from converter.encode import freeknots, groups, overlap
+from converter.encode import freeknots, groups, overlap, robust_affine
 from converter.encode import keys as keyframes
 from converter.encode.budget import ErrorBudget
 from converter.extract import extract, fit_camera
@@ -48,7 +48,8 @@ def test_fit_affine_is_robust_to_local_motion():
     _, mats = _random_affine(rng, 5)
     xy = np.einsum("tij,nj->tni", mats[:, :, :2], ref) + mats[:, None, :, 2]
     xy[:, :40] += rng.uniform(5, 20, (5, 40, 2))  # a tenth of the points move on their own (a mouth)
-    fit = groups.fit_affine(ref, xy)
+    fit = robust_affine.fit_affine(ref, xy)
+    assert np.abs(robust_affine.fit_affine(ref, xy[:, ::-1], np.arange(399, -1, -1)) - fit).max() < 1e-9
     assert np.abs(fit - mats).max() < 0.05 * np.abs(mats).max()
     pred = np.einsum("tij,nj->tni", fit[:, :, :2], ref) + fit[:, None, :, 2]
     assert np.linalg.norm(pred - xy, axis=-1)[:, 40:].max() < 0.5
