@@ -15,8 +15,9 @@ import numpy as np
 from converter.encode import parallel
 
 OVERLAP_BLOCK = 8  # frames per block of the bounding-box candidate search
-PAIR_BITMAP_MAX = 1 << 26  # path pairs deduplicated through a bitmap up to this many (8k paths, 64 MB)
 STROKE_MARGIN_PX = 0.5  # two paths closer than this may share stroke pixels: their order is kept
+EMPTY = -1  # a free slot of a PairSet's table
+PAIRSET_BITS = 16  # a PairSet starts with 2^16 slots (512 KB) and doubles when half full
 
 
 # The compiled helpers address a triangle as (pts, frame, path), never as a slice, and are inlined: a slice or an
@@ -159,6 +160,73 @@ def _candidates(key, owner, c0, band, lo, hi, out) -> int:
     return m
 
 
+class PairSet:
+    """A set of pair codes (int64 >= 0), open addressing in one int64 table kept at most half full: memory follows
+    the pairs found, not the paths squared (a bitmap of 27k paths would take 712 MB) nor the blocks (a list of
+    each block's finds took 2.8 GB on a 4,000-frame capture of the ICT head before its final np.unique)."""
+
+    def __init__(self, bits: int | None = None):
+        bits = PAIRSET_BITS if bits is None else bits
+        self.table = np.full(1 << bits, EMPTY, np.int64)
+        self.shift = 64 - bits
+        self.count = 0
+
+    def absent(self, codes: np.ndarray) -> np.ndarray:
+        """Bool (N,): which codes are not in the set."""
+        out = np.empty(len(codes), np.bool_)
+        _absent(self.table, self.shift, np.ascontiguousarray(codes, np.int64), out)
+        return out
+
+    def add(self, codes: np.ndarray) -> None:
+        """Add codes (duplicates allowed)."""
+        codes = np.ascontiguousarray(codes, np.int64)
+        if 2 * (self.count + len(codes)) > len(self.table):
+            old = self.table[self.table != EMPTY]
+            bits = max(64 - self.shift, int(2 * (self.count + len(codes)) - 1).bit_length() + 1)
+            self.table = np.full(1 << bits, EMPTY, np.int64)
+            self.shift = 64 - bits
+            self.count = _add(self.table, self.shift, old)
+        self.count += _add(self.table, self.shift, codes)
+
+    def sorted(self) -> np.ndarray:
+        """The codes, ascending."""
+        return np.sort(self.table[self.table != EMPTY])
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _slot(code, shift):
+    """Fibonacci hashing: the top bits of code times 2^64 / golden ratio."""
+    return np.int64((np.uint64(code) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(shift))
+
+
+@numba.njit(cache=True, nogil=True)
+def _absent(table, shift, codes, out):
+    """out[i] = codes[i] is not in table."""
+    mask = len(table) - 1
+    for i in range(len(codes)):
+        c = codes[i]
+        s = _slot(c, shift)
+        while table[s] != c and table[s] != EMPTY:
+            s = (s + 1) & mask
+        out[i] = table[s] == EMPTY
+
+
+@numba.njit(cache=True, nogil=True)
+def _add(table, shift, codes) -> int:
+    """Insert codes into table (with room); the number newly inserted."""
+    mask = len(table) - 1
+    n = 0
+    for i in range(len(codes)):
+        c = codes[i]
+        s = _slot(c, shift)
+        while table[s] != c and table[s] != EMPTY:
+            s = (s + 1) & mask
+        if table[s] == EMPTY:
+            table[s] = c
+            n += 1
+    return n
+
+
 def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP_BLOCK,
                   margin: float = STROKE_MARGIN_PX, band: np.ndarray | None = None,
                   corners: np.ndarray | None = None) -> np.ndarray:
@@ -176,8 +244,7 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP
     t, p = active.shape
     xy32 = xy_paths if corners is not None else np.asarray(xy_paths, np.float32)
     m32 = np.float32(margin)
-    seen = np.zeros(p * p, bool) if p * p <= PAIR_BITMAP_MAX else None  # dedupe by scatter, not by sorting
-    found = []
+    found = PairSet()
     last_m = 0
     for k0 in range(0, t, block):
         act = active[k0:k0 + block]
@@ -200,20 +267,11 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP
             _candidates(key, owner, c0, own_band, lo, hi, out)
         la, lb = out[:m, 0], out[:m, 1]
         glob = idx[la] * p + idx[lb]
-        if seen is not None:
-            fresh = ~seen[glob]
-            la, lb, glob = la[fresh], lb[fresh], glob[fresh]
+        fresh = found.absent(glob)  # a pair found in an earlier block is not tested again
+        la, lb, glob = la[fresh], lb[fresh], glob[fresh]
         meet = np.zeros(len(glob), bool)
         if len(glob):
             parallel.threaded(_meet, len(glob), pts, on, la, lb, m32, meet)
-        if seen is not None:
-            seen[glob[meet]] = True
-        else:
-            found.append(glob[meet])
-    if seen is not None:
-        code = np.flatnonzero(seen)
-    elif found:
-        code = np.unique(np.concatenate(found))
-    else:
-        return np.zeros((0, 2), np.int64)
+        found.add(glob[meet])
+    code = found.sorted()
     return np.column_stack([code // p, code % p])

@@ -175,12 +175,29 @@ def test_local_radius_shrinks_with_gain():
     assert (r > 0).all()
 
 
-@pytest.mark.parametrize("bitmap", [True, False])
-def test_overlap_pairs_match_every_pair_tested_by_brute_force(monkeypatch, bitmap):
+def test_pair_set_is_a_set():
+    # Against Python's set: duplicates within and across batches, growth from a 2-slot table (every insert
+    # collides and probes, every other one rehashes), codes up to 2^62.
+    rng = np.random.default_rng(5)
+    pairs, want = overlap.PairSet(bits=1), set()
+    for n in (1, 3, 50, 400, 2000):
+        codes = np.concatenate([rng.integers(0, 5000, n), rng.integers(0, 1 << 62, n)])
+        absent = pairs.absent(codes)
+        assert absent.tolist() == [c not in want for c in codes.tolist()]
+        pairs.add(codes)
+        want |= set(codes.tolist())
+        assert pairs.count == len(want) and 2 * pairs.count <= len(pairs.table)
+    assert pairs.sorted().tolist() == sorted(want)
+    assert not pairs.absent(np.array(sorted(want))).any()
+
+
+@pytest.mark.parametrize("grows", [False, True])
+def test_overlap_pairs_match_every_pair_tested_by_brute_force(monkeypatch, grows):
     # Random small triangles over a few blocks of frames, some hidden, two bands: the grid candidates, their
-    # per-cell reporting and the dedupe across blocks (bitmap or sorted list) against testing every pair.
-    if not bitmap:
-        monkeypatch.setattr(overlap, "PAIR_BITMAP_MAX", 0)
+    # per-cell reporting and the dedupe across blocks (a PairSet, starting at 2 slots when it grows) against
+    # testing every pair.
+    if grows:
+        monkeypatch.setattr(overlap, "PAIRSET_BITS", 1)
     rng = np.random.default_rng(11)
     t, p = 20, 60
     centre = rng.uniform(0, 60, (1, p, 1, 2)) + np.cumsum(rng.normal(0, 1.0, (t, p, 1, 2)), axis=0)
