@@ -98,7 +98,7 @@ def _fit_frames(ref, xy, idx, iterations, huber, out, first, stop):  # pragma: n
                 b[2, 1] += w * y
             m[1, 0], m[2, 0], m[2, 1] = m[0, 1], m[0, 2], m[1, 2]
             for k in range(3):
-                m[k, k] += 1e-9
+                m[k, k] += RIDGE
             _solve3(m, b, sol)
         for r in range(2):
             for k in range(3):

@@ -689,9 +689,8 @@ void main() { o = v; }`;
 
     // Multisampling costs a software-rendered or weak GPU most of its frame. WebGL 2 times it before the first
     // frame (webgl2Renderer's probe) and starts without it when it takes over half a 60 Hz frame. Later, the
-    // player draws on without it (WebGL
-    // 2: straight to the canvas; WebGL 1: on a new canvas, as a context keeps its attributes), once and for the
-    // rest of the page's life, when the median of
+    // player draws on without it (WebGL 2: straight to the canvas; WebGL 1: on a new canvas, as a context keeps
+    // its attributes), once and for the rest of the page's life, when the median of
     // SLOW_WINDOW played frames misses SLOW_FPS, or as soon as frames come late while the median keeps the
     // display's pace: more than LATE_SHARE of 2 * SLOW_WINDOW intervals over 1.5 display frames (the shortest
     // interval seen), counted in the last 2 * SLOW_WINDOW. A device that plays 55 of 60 frames draws every frame
