@@ -155,9 +155,7 @@ def vertex_normals(frames: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 def face_normals(frames: np.ndarray, faces: np.ndarray, normalize: bool = True) -> np.ndarray:
     """Per-frame triangle normals (T, F, 3); area-weighted when normalize is False."""
-    a = frames[:, faces[:, 0]]
-    b = frames[:, faces[:, 1]]
-    c = frames[:, faces[:, 2]]
+    a, b, c = (np.take(frames, faces[:, i], axis=1) for i in range(3))
     n = np.cross(b - a, c - a)
     if normalize:
         ln = np.linalg.norm(n, axis=-1, keepdims=True)

@@ -19,7 +19,7 @@ def fit_camera(anim: FaceAnimation, size: int = 512, yaw: float = 0.0, pitch: fl
                fov: float = 30.0, ortho: bool = False, frame_on: str | None = None) -> Camera:
     """The camera that frames the animation (every frame) from the chosen angle: see framing.resolve for what."""
     framed = framing.resolve(anim, frame_on)
-    frames = anim.frames if framed.vertices is None else anim.frames[:, framed.vertices]
+    frames = anim.frames if framed.vertices is None else np.take(anim.frames, framed.vertices, axis=1)
     return Camera.fit(frames, size=size, yaw=yaw + framed.yaw, pitch=pitch, fov=fov, ortho=ortho)
 
 
@@ -27,9 +27,10 @@ def cull(xy: np.ndarray, ndc_z: np.ndarray, w: np.ndarray, faces: np.ndarray, wi
     """Bool (T, F): whole-triangle view-frustum culling plus back-face culling (front = counter-clockwise in GL)."""
     x, y = xy[..., 0], xy[..., 1]
     f0, f1, f2 = faces[:, 0], faces[:, 1], faces[:, 2]
-    ax, ay = x[:, f0], y[:, f0]
+    ax, ay = np.take(x, f0, axis=1), np.take(y, f0, axis=1)
     # Screen y points down, so a counter-clockwise (front) triangle has a negative signed area here.
-    area2 = (x[:, f1] - ax) * (y[:, f2] - ay) - (y[:, f1] - ay) * (x[:, f2] - ax)
+    x1, y1, x2, y2 = (np.take(a, f, axis=1) for a, f in ((x, f1), (y, f1), (x, f2), (y, f2)))
+    area2 = (x1 - ax) * (y2 - ay) - (y1 - ay) * (x2 - ax)
     # Per vertex, one bit per side of the view volume it lies beyond and one for not in front of the eye: a
     # triangle is outside when its three corners share a side, behind when one corner is. (Bits per vertex,
     # then three uint8 gathers: (T, F, 3) gathers and .all(-1) cost 10x more on long clips.)
@@ -37,7 +38,7 @@ def cull(xy: np.ndarray, ndc_z: np.ndarray, w: np.ndarray, faces: np.ndarray, wi
     for i, out in enumerate((x < 0, x > width, y < 0, y > height, ndc_z < -1, ndc_z > 1)):
         bits |= out.view(np.uint8) << np.uint8(i)
     bits |= (~(w > 0)).view(np.uint8) << np.uint8(7)
-    b0, b1, b2 = bits[:, f0], bits[:, f1], bits[:, f2]
+    b0, b1, b2 = (np.take(bits, f, axis=1) for f in (f0, f1, f2))
     outside = (b0 & b1 & b2 & np.uint8(63)) != 0
     behind = ((b0 | b1 | b2) & np.uint8(128)) != 0
     return (area2 < 0) & ~behind & ~outside

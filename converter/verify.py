@@ -398,12 +398,12 @@ def compare(ev: Evaluated, exact_xy: np.ndarray, expected_visible: np.ndarray, f
         raise InputError(f"the SVG has {t} frames but the input gives {exact_xy.shape[0]}; pass the same input.")
     if ev.triangles.max() >= len(faces):
         raise InputError("the SVG names triangles the input does not have; pass the input it was made from.")
-    exact = exact_xy[:, faces[ev.triangles]]  # (T, P, 3, 2)
+    exact = np.take(exact_xy, faces[ev.triangles], axis=1)  # (T, P, 3, 2)
     dist = np.linalg.norm(ev.xy - exact, axis=-1)  # (T, P, 3)
     dist = np.where(np.isnan(dist), np.inf, dist)
     shown = ev.shown
     if ev.collapsed is not None:  # a visible triangle smaller than the tolerance may be drawn as its point
-        small = ev.collapsed & expected_visible[:, ev.triangles] & (dist <= tolerance).all(axis=-1)
+        small = ev.collapsed & np.take(expected_visible, ev.triangles, axis=1) & (dist <= tolerance).all(axis=-1)
         shown = shown | small
     drawn = shown[..., None] & np.ones(3, bool)
     d = dist[drawn]

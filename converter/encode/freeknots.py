@@ -269,7 +269,7 @@ def _reduce_block(x: np.ndarray, active: np.ndarray, eps: np.ndarray, limit: np.
     if n and t:
         parallel.threaded(_reduce, n, x, active, eps, lim, mask, values, bad, gave_up)
     if bad.any():  # numerically awkward tracks: sampled keys, always valid
-        fb = keys.reduce(x[:, bad], active[:, bad], eps[bad])
+        fb = keys.reduce(np.compress(bad, x, axis=1), np.compress(bad, active, axis=1), eps[bad])
         mask[:, bad], values[:, bad] = fb.mask, fb.values
     if scale is not None:
         np.divide(values, scale, out=values)
@@ -325,8 +325,9 @@ def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
             idx = np.arange(b, min(b + size, n)) if nearest is None else b + np.flatnonzero(nearest == a)
             if not len(idx):
                 continue
-            limit = best.mask[:, idx].sum(axis=0)
-            k, gave_up = _reduce_block(xy[:, idx], active[:, idx], r[idx], limit, _scale(a, m))
+            limit = np.take(best.mask, idx, axis=1).sum(axis=0)
+            k, gave_up = _reduce_block(np.take(xy, idx, axis=1), np.take(active, idx, axis=1), r[idx], limit,
+                                       _scale(a, m))
             win = np.flatnonzero(~gave_up & (k.mask.sum(axis=0) < limit))
             best.mask[:, idx[win]], best.values[:, idx[win]] = k.mask[:, win], k.values[:, win]
     return best

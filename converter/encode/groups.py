@@ -119,7 +119,7 @@ class Layout(NamedTuple):
         band = self.band[sel]
         for b in np.unique(band).tolist():
             at = np.flatnonzero(band == b)
-            pts = self.head_local[:, sel[at]].reshape(t, len(at), 3, 2)
+            pts = np.take(self.head_local, sel[at], axis=1).reshape(t, len(at), 3, 2)
             out[:, at] = local_tracks(pts, self.motions[b].matrices).reshape(t, len(at), 6)
         return out
 
@@ -180,7 +180,7 @@ def merge_by_motion(piece: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutra
         errors = []
         for _, fit, centre in bands:
             pred = apply_linear(fit[:, :, :2], ref - centre) + fit[:, None, :, 2]
-            errors.append(np.percentile(np.linalg.norm(pred - xy[:, verts], axis=-1), 95))
+            errors.append(np.percentile(np.linalg.norm(pred - np.take(xy, verts, axis=1), axis=-1), 95))
         if errors and (min(errors) <= threshold or size < small):
             out[piece == pid] = bands[int(np.argmin(errors))][0]
             continue
@@ -207,7 +207,7 @@ def motion_clusters(band: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutral
     ref = xy[neutral, verts]
     center = ref.mean(axis=0)
     fit = fit_affine(ref - center, xy, verts)
-    res = xy[:, verts] - (apply_linear(fit[:, :, :2], ref - center) + fit[:, None, :, 2])
+    res = np.take(xy, verts, axis=1) - (apply_linear(fit[:, :, :2], ref - center) + fit[:, None, :, 2])
     if np.percentile(np.linalg.norm(res - res.mean(axis=0), axis=-1), 95) <= MERGE_PX:
         return out  # the head moves rigidly: one band explains it
     feat = res.transpose(1, 0, 2).reshape(len(verts), -1)
@@ -389,7 +389,7 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
     band = band[order]
     # Stored as float32: ~1e-5 px at these magnitudes (budget.float_err), half the plan's largest array.
     in_head = in_head.astype(np.float32)
-    path_head = in_head[:, faces[tris[order]]]  # (T, P, 3, 2) head frame
+    path_head = np.take(in_head, faces[tris[order]], axis=1)  # (T, P, 3, 2) head frame
     gains = np.zeros(len(band_ids))
     for b, m in enumerate(motions):
         lin = np.einsum("tij,tjk->tik", head.matrices[:, :, :2], m.matrices[:, :, :2])
@@ -439,7 +439,7 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     t, p = active.shape
     lay = layout(xy, faces, part_ids, neutral, tris, active, budget, head_clusters=head_clusters,
                  merge_runs=merge_runs)
-    act = active[:, lay.order]
+    act = np.take(active, lay.order, axis=1)
     global_radius = budget.keys
     r_local = budget.local_keys(lay.gain)
     r_head = float(budget.local_keys(np.array([lay.head.gain]))[0])
@@ -517,7 +517,7 @@ def _plain_keys(xy: np.ndarray, faces: np.ndarray, tris: np.ndarray, active: np.
     keys_n = 0
     for i, step in enumerate(steps):
         sample = np.arange(0, p, step)
-        plain = freeknots.point_keys(_tracks(xy, faces, tris[sample]), active[:, sample],
+        plain = freeknots.point_keys(_tracks(xy, faces, tris[sample]), np.take(active, sample, axis=1),
                                      np.full(len(sample), max(radius, 1e-6)), freeknots.SHAPES_DEG[:1])
         keys_n = int(round(plain.mask.sum() * p / len(sample)))
         if i == len(steps) - 1 or abs(keys_n - grouped_keys) > PLAIN_MARGIN * grouped_keys:
@@ -528,7 +528,7 @@ def _plain_keys(xy: np.ndarray, faces: np.ndarray, tris: np.ndarray, active: np.
 def _tracks(xy: np.ndarray, faces: np.ndarray, tris: np.ndarray) -> np.ndarray:
     """Screen tracks (T, P, 6) px of the triangles tris, float32 as the Sheet stores them (the free-knot pass
     works on float64 copies a block of tracks at a time)."""
-    return np.asarray(xy[:, faces[tris]], np.float32).reshape(xy.shape[0], len(tris), 6)
+    return np.asarray(np.take(xy, faces[tris], axis=1), np.float32).reshape(xy.shape[0], len(tris), 6)
 
 
 def _run_blocks(runs: list[tuple[int, int]], size: int) -> list[list[tuple[int, int]]]:
@@ -550,7 +550,7 @@ def compose_tracks(plan_: Plan, local: np.ndarray) -> np.ndarray:
     t, p = out.shape[:2]
 
     def apply(m: BandMotion, sel: np.ndarray) -> None:
-        pts = out[:, sel].reshape(t, len(sel), 3, 2)
+        pts = np.take(out, sel, axis=1).reshape(t, len(sel), 3, 2)
         out[:, sel] = (apply_linear(m.matrices[:, :, :2], pts)
                        + m.matrices[:, None, None, :, 2]).reshape(t, len(sel), 6)
 

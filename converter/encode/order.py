@@ -57,9 +57,9 @@ def overlapping_pairs(sheet: Sheet, tris: np.ndarray, frames: np.ndarray,
     The pair search is converter.encode.overlap's, frame by frame (blocks of one frame) with a negative margin:
     "within -m px" is "overlapping by more than m" along each separating axis."""
     fr = np.asarray(frames, np.int64)
-    shown = sheet.visible[:, tris] if active is None else active
+    shown = np.take(sheet.visible, tris, axis=1) if active is None else active
     f = sheet.faces[tris]
-    pairs = overlap_pairs(sheet.xy[fr][:, f], shown[fr], block=1, margin=-OVERLAP_MARGIN_PX)
+    pairs = overlap_pairs(np.take(sheet.xy[fr], f, axis=1), shown[fr], block=1, margin=-OVERLAP_MARGIN_PX)
     shared = (f[pairs[:, 0], :, None] == f[pairs[:, 1], None, :]).any(axis=(1, 2))
     return pairs[~shared]
 
@@ -139,9 +139,9 @@ def _nearer(a: np.ndarray, za: np.ndarray, b: np.ndarray, zb: np.ndarray) -> np.
 def front_of(sheet: Sheet, tris: np.ndarray, pairs: np.ndarray, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For pairs (M, 2) at frames (S,): interiors overlap with both visible (S, M), and first is nearer (S, M)."""
     fr = np.asarray(frames)
-    xy = sheet.xy[fr][:, sheet.faces[tris]]
-    z = sheet.depth[fr][:, sheet.faces[tris]]
-    vis = sheet.visible[fr][:, tris]
+    xy = np.take(sheet.xy[fr], sheet.faces[tris], axis=1)
+    z = np.take(sheet.depth[fr], sheet.faces[tris], axis=1)
+    vis = np.take(sheet.visible[fr], tris, axis=1)
     m = len(pairs)
     overlap = np.zeros((len(fr), m), bool)
     first_nearer = np.zeros((len(fr), m), bool)
@@ -159,13 +159,13 @@ def draw_list(sheet: Sheet, layers: bool = False) -> DrawList:
     if layers:
         return layered(sheet)
     tris = np.asarray(sheet.order, np.int32)
-    return DrawList(tris, sheet.visible[:, tris])
+    return DrawList(tris, np.take(sheet.visible, tris, axis=1))
 
 
 def layered(sheet: Sheet) -> DrawList:
     """Experimental: the fixed order plus layer copies of triangles that must cover later-drawn ones."""
     tris = np.asarray(sheet.order, np.int32)
-    active = sheet.visible[:, tris]
+    active = np.take(sheet.visible, tris, axis=1)
     if len(tris) < 2:
         return DrawList(tris, active)
     samples = sample_frames(sheet.n_frames)

@@ -254,8 +254,8 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP
         if corners is None:
             pts = xy32[k0:k0 + block, idx]  # (B, n, 3, 2)
         else:
-            pts = np.asarray(xy32[k0:k0 + block][:, corners[idx]], np.float32)
-        on = act[:, idx]
+            pts = np.asarray(np.take(xy32[k0:k0 + block], corners[idx], axis=1), np.float32)
+        on = np.take(act, idx, axis=1)
         lo, hi = _boxes(pts, on, np.float32(margin / 2))
         cell = max(1.5 * float(np.median((hi - lo).max(axis=1))), 1.0)
         key, owner, c0 = _cell_lists(lo, hi, cell)

@@ -90,7 +90,7 @@ class Decoded:
 
     def path_xy(self) -> np.ndarray:
         """(T, P, 3, 2) px of every path's vertices at frames 0..T-1."""
-        return self.xy[:-1][:, self.path_vertices]
+        return np.take(self.xy[:-1], self.path_vertices, axis=1)
 
 
 def player_script() -> str:
@@ -169,7 +169,7 @@ def _position_keys(sheet: Sheet, tris: np.ndarray, verts: np.ndarray, local: np.
                    budget: ErrorBudget, rigid: bool) -> tuple[keyframes.Keys, np.ndarray | None]:
     """Per-vertex keys in px, or (with rigid) local to the head transform (_head) when that saves more key bytes
     than the transform costs; the transforms (T + 1, 2, 3) float32 or None."""
-    xy = sheet.xy[:, verts].astype(np.float64)
+    xy = np.take(sheet.xy, verts, axis=1).astype(np.float64)
     # Keys sit on integer frames (nothing to round in time): the keyTimes share is the keyframes' too.
     plain = freeknots.point_keys(xy, vact, budget.tolerance - budget.rounding - budget.float_err)
     head = _head(sheet, tris, local, xy, budget) if rigid else None
@@ -197,7 +197,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
                          "(--start/--end).")
     dl = draw_list(sheet, layers=options.depth_layers)
     shown_any = dl.active.any(axis=0)
-    tris, active = dl.triangles[shown_any].astype(np.int64), dl.active[:, shown_any]
+    tris, active = dl.triangles[shown_any].astype(np.int64), np.compress(shown_any, dl.active, axis=1)
     p = len(tris)
     corners = sheet.faces[tris].astype(np.int64)
     verts, local = np.unique(corners, return_inverse=True)
@@ -210,7 +210,8 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
     pc, pf, pv = _pack_keys(q.mask, q.values)
     wide = bool(len(pv)) and (pv.min() < -32768 or pv.max() > 32767)
     gouraud = options.shading != "flat"
-    rgb, cact = (sheet.vertex_rgb[:, verts], vact) if gouraud else (sheet.face_rgb[:, tris], active)
+    rgb, cact = ((np.take(sheet.vertex_rgb, verts, axis=1), vact) if gouraud
+                  else (np.take(sheet.face_rgb, tris, axis=1), active))
     cc, cf, cv = _color_keys(rgb, cact)
     vis0, vc, vf = _changes(active)
     sections = [

@@ -219,7 +219,7 @@ def _color_block(levels: np.ndarray, active: np.ndarray, tolerance: float) -> tu
     rest = np.flatnonzero(~flat)
     if len(rest):
         eps = max(tolerance - 0.5 - COLOR_TIME_LEVELS, 1e-6)  # rounding, keyTimes
-        keys = freeknots.reduce_free(levels[:, rest], active[:, rest], eps)
+        keys = freeknots.reduce_free(np.take(levels, rest, axis=1), np.take(active, rest, axis=1), eps)
         mask[:, rest] = keys.mask
         values[:, rest] = np.rint(keys.values)
         # A free key may lie outside 0..255 (extrapolated across hidden frames), where clipping would move the
@@ -321,7 +321,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     dl = draw_list(sheet, layers=options.depth_layers)
     tris, active = dl.triangles, dl.active
     shown = active.any(axis=0)  # a path never shown is dropped
-    tris, active = tris[shown], active[:, shown]
+    tris, active = tris[shown], np.compress(shown, active, axis=1)
     p = len(tris)
     dur = f"{sheet.duration:.6f}".rstrip("0").rstrip(".") + "s"  # SMIL clock values need the leading digit
     extra: dict = {"encoding": {"mode": mode}}
@@ -333,11 +333,11 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
         costs = groups.Costs(lambda m: len(group_open(m, t, dur)), len(CLOSE), BYTES_PER_KEY)
         plan = groups.plan(sheet.xy, sheet.faces, sheet.part_ids, sheet.neutral, tris, active, budget, costs)
         if plan.head is not None:  # else nothing pays for a group: the plain encoding, byte for byte
-            tris, active, track = tris[plan.order], active[:, plan.order], plan.track
+            tris, active, track = tris[plan.order], np.take(active, plan.order, axis=1), plan.track
         else:
             plan = None
     if plan is None:  # float32 as stored (the free-knot pass reduces a float64 copy a block of paths at a time)
-        track = sheet.xy[:, sheet.faces[tris]].reshape(t, p, 6)
+        track = np.take(sheet.xy, sheet.faces[tris], axis=1).reshape(t, p, 6)
     joined = None
     if mode == "bounded" and options.max_animations is not None and p > options.max_animations:
         joined, tris, active, track, plan = _merge_plan(sheet, tris, active, track, plan, options)
@@ -373,18 +373,18 @@ def _merge_plan(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.nd
         edge = np.zeros(len(tris) + 1, np.int64)
         edge[plan.groups.ravel()] = 1
         segment = np.cumsum(edge[:-1])
-    joined = merge.plan(segment, sheet.face_rgb[:, tris], active, options.color_tolerance,
-                        sheet.xy[:, sheet.faces[tris]], options.max_animations)
+    joined = merge.plan(segment, np.take(sheet.face_rgb, tris, axis=1), active, options.color_tolerance,
+                        np.take(sheet.xy, sheet.faces[tris], axis=1), options.max_animations)
     o = joined.order
     if plan is not None:
-        keys = plan.keys._replace(mask=plan.keys.mask[:, o], values=plan.keys.values[:, o],
+        keys = plan.keys._replace(mask=np.take(plan.keys.mask, o, axis=1), values=np.take(plan.keys.values, o, axis=1),
                                   first_active=plan.keys.first_active[o])
-        plan = plan._replace(track=plan.track[:, o], radius=plan.radius[o], band=plan.band[o], gain=plan.gain[o],
-                             keys=keys)
+        plan = plan._replace(track=np.take(plan.track, o, axis=1), radius=plan.radius[o], band=plan.band[o],
+                             gain=plan.gain[o], keys=keys)
         track = plan.track
     else:
-        track = track[:, o]
-    return joined, tris[o], active[:, o], track, plan
+        track = np.take(track, o, axis=1)
+    return joined, tris[o], np.take(active, o, axis=1), track, plan
 
 
 def _merged_geometry(track: np.ndarray, active: np.ndarray, radius: np.ndarray, gain: np.ndarray,
@@ -414,14 +414,14 @@ def _merged_band(track: np.ndarray, active: np.ndarray, radius: np.ndarray, gain
     width = max(b - a for a, b in sets)
     idx = np.array([[min(a + i, b - 1) for i in range(width)] for a, b in sets], np.int64)  # (Q, M) padded
     q = len(sets)
-    joint_track = track[:, idx].reshape(t, q, width * 6)
-    keys = freeknots.point_keys(joint_track, active[:, idx].any(axis=2), radius[idx[:, 0]])
+    joint_track = np.take(track, idx, axis=1).reshape(t, q, width * 6)
+    keys = freeknots.point_keys(joint_track, np.take(active, idx, axis=1).any(axis=2), radius[idx[:, 0]])
     members = np.concatenate([np.arange(a, b) for a, b in sets])
     set_of = np.repeat(np.arange(q), [b - a for a, b in sets])
     slot = members - np.repeat([a for a, _ in sets], [b - a for a, b in sets])
-    vals = keys.values.reshape(t + 1, q, width, 6)[:, set_of, slot]
-    mk = keyframes.Keys(keys.mask[:, set_of], vals, keys.first_active[set_of])
-    tl = collapse.fold(mk, active[:, members])
+    vals = np.take(keys.values.reshape(t + 1, q * width, 6), set_of * width + slot, axis=1)
+    mk = keyframes.Keys(np.take(keys.mask, set_of, axis=1), vals, keys.first_active[set_of])
+    tl = collapse.fold(mk, np.take(active, members, axis=1))
     bounds = np.searchsorted(tl.path, np.arange(len(members) + 1))
     paths, halves, values, coll, snaps = [], [], [], [], []
     first = 0
@@ -480,7 +480,7 @@ def raw_values_bytes(xy: np.ndarray, corners: np.ndarray) -> int:
     block = max(1, RAW_COUNT_CELLS // t)
     for a in range(0, len(verts), block):
         v = verts[a:a + block]
-        c = np.rint(np.asarray(xy[:, v], np.float64) * 100).astype(np.int64)
+        c = np.rint(np.asarray(np.take(xy, v, axis=1), np.float64) * 100).astype(np.int64)
         per = (_digits(np.abs(c) // 100) + 3 + (c < 0)).sum(axis=2)  # (T, n): "x.xx" "y.yy" of each vertex
         total += int(((per.sum(axis=0) + per[-1]) * uses[v]).sum())
     return total + (t + 1) * p * (7 + 1) - p  # M L L Z and two commas per value, ';' between values
@@ -607,7 +607,8 @@ def _uniform_instead(attribute: str, track: np.ndarray, active: np.ndarray, coun
         worth = head + cand * (value_len[todo] + 1) - 1 < keyed_len[todo]
         for n in np.unique(cand[worth]).tolist():
             idx = todo[worth & (cand == n)]
-            q, ok = keyframes.uniform_fit(np.asarray(track[:, idx], np.float64), active[:, idx], n, scale,
+            q, ok = keyframes.uniform_fit(np.asarray(np.take(track, idx, axis=1), np.float64),
+                                          np.take(active, idx, axis=1), n, scale,
                                           radius if np.isscalar(radius) else radius[idx], pairs)
             for j, col in zip(idx[ok].tolist(), np.flatnonzero(ok).tolist()):
                 values[j] = q[:, col]
