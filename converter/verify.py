@@ -414,7 +414,7 @@ def compare(ev: Evaluated, exact_xy: np.ndarray, expected_visible: np.ndarray, f
     tri_ids = np.unique(ev.triangles)
     drawn_tri = np.zeros((t, len(faces)), bool)
     np.logical_or.at(drawn_tri.T, ev.triangles, shown.T)
-    wrong = drawn_tri[:, tri_ids] != expected_visible[:, tri_ids]
+    wrong = np.take(drawn_tri, tri_ids, axis=1) != np.take(expected_visible, tri_ids, axis=1)
     absent = np.ones(len(faces), bool)
     absent[tri_ids] = False
     return Verification(

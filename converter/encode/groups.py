@@ -445,10 +445,12 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     r_head = float(budget.local_keys(np.array([lay.head.gain]))[0])
     ok = r_local > 0.05 * global_radius  # a band that magnifies errors too much is not worth it
 
-    def keys_of(x, r, cols=slice(None)):
+    def keys_of(x, r, cols=None):
         # Squares only: which paths to wrap is decided on these; the other shapes refine the chosen tracks below.
-        return freeknots.point_keys(x, act[:, cols], np.broadcast_to(np.maximum(r, 1e-6), (p,))[cols],
-                                    freeknots.SHAPES_DEG[:1])
+        on, radii = act, np.broadcast_to(np.maximum(r, 1e-6), (p,))
+        if cols is not None:
+            on, radii = np.take(act, cols, axis=1), radii[cols]
+        return freeknots.point_keys(x, on, radii, freeknots.SHAPES_DEG[:1])
 
     out_track = lay.head_local  # head-local tracks, replaced in place by band-local ones where a run is wrapped
     keys = keys_of(out_track, r_head)

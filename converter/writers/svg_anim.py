@@ -292,7 +292,7 @@ def color_error(rgb: np.ndarray, active: np.ndarray, steps: keyframes.Keys,
         sl = slice(a, a + block)
         held = np.maximum.accumulate(np.where(steps.mask[:t, sl], frame, 0), axis=0)
         played = np.take_along_axis(steps.values[:t, sl], held[..., None], axis=0).astype(np.float64)
-        exact = rgb[:, sl] if paths is None else rgb[:, paths[sl]]
+        exact = rgb[:, sl] if paths is None else np.take(rgb, paths[sl], axis=1)
         err = np.abs(np.asarray(exact, np.float64) * 255 - played).max(axis=-1)
         out.append(err[active[:, sl]].astype(np.float32))
     return np.concatenate(out) if out else np.zeros(0, np.float32)
@@ -501,8 +501,8 @@ def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.nd
     ids = path_ids(tris)
     for a in range(0, p, RAW_WRITE_PATHS):
         sl = slice(a, a + RAW_WRITE_PATHS)
-        lines = _raw_block(sheet.face_rgb[:, tris[sl]], active[:, sl], track[:, sl], ids[sl], kt, kt_lin, dur,
-                           chapter)
+        lines = _raw_block(np.take(sheet.face_rgb, tris[sl], axis=1), active[:, sl], track[:, sl], ids[sl], kt,
+                           kt_lin, dur, chapter)
         out.append("\n".join(lines).encode("utf-8"))
     return out
 

@@ -362,11 +362,11 @@ def write(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
         tri, closed, stroked = seam_layout(tris, skip)
     else:  # the chapter draws no strokes: its background triangles are its answer to cracks
         tri, closed, stroked = sheet.faces[order], np.ones(len(order), bool), np.zeros(len(order), bool)
-    tri_xy = sheet.xy[frames][:, tri].astype(np.float64)  # (T, K, 3, 2)
-    tri_rgb = sheet.vertex_rgb[frames][:, tri].astype(np.float64)  # (T, K, 3, 3)
+    tri_xy = np.take(sheet.xy[frames], tri, axis=1).astype(np.float64)  # (T, K, 3, 2)
+    tri_rgb = np.take(sheet.vertex_rgb[frames], tri, axis=1).astype(np.float64)  # (T, K, 3, 3)
     eps = max(options.tolerance - ROUNDING_PX, ROUNDING_PX)
     color_scale = eps / COLOR_EPS_LEVELS  # colour levels -> px-equivalent units, so one eps bounds both
-    active = sheet.visible[frames][:, order]
+    active = np.take(sheet.visible[frames], order, axis=1)
     if method == "exact":
         signals, residual = _signals_exact(tri_xy, tri_rgb, color_scale)
         report.figures["gouraud_rank1_max_residual"] = float(residual[active].max()) if active.any() else 0.0
