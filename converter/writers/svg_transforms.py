@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 from converter.encode.groups import BandMotion
-from converter.writers.svgtext import key_times
-from converter.writers.svgtext import number as svg_number
+from converter.writers.svgtext import key_times, numbers
 
 CLOSE = "</g>"
 IDENTITY = {"translate": [0.0, 0.0], "rotate": [0.0], "skewX": [0.0], "scale": [1.0, 1.0]}
@@ -18,7 +17,8 @@ def group_open(motion: BandMotion, n_frames: int, dur: str) -> str:
     summed onto that (document order), which is the same played transform. Identity terms are left out."""
     first, anims = [], []
     for i, a in enumerate(motion.anims):
-        rows = [" ".join(svg_number(v, a.decimals) for v in row) for row in a.values.tolist()]
+        nums, width = numbers(a.values, a.decimals), a.values.shape[1]
+        rows = [" ".join(nums[j:j + width]) for j in range(0, len(nums), width)]
         if a.values[0].tolist() != IDENTITY[a.kind]:
             first.append(f"{a.kind}({rows[0]})")
         additive = ' additive="sum"' if i else ""
