@@ -8,8 +8,9 @@ The reduction is a greedy "feasible velocity cone" (a box here: one interval per
 start key (time s, value p), a straight segment to a later key at frame e passes within ``eps`` of every active
 frame k in between iff its velocity lies in the intersection of the intervals
 ``[(x_k - p - eps) / (k - s), (x_k - p + eps) / (k - s)]``. Each frame updates the box in O(D); when the next
-active frame cannot be reached inside the box, the previous active frame becomes a key. Every track advances
-together, so the whole reduction is one loop over frames vectorised over tracks.
+active frame cannot be reached inside the box, the previous active frame becomes a key. The loop is compiled
+(numba), one track at a time: the frames of a track are sequential, and a loop over frames vectorised over
+tracks cost a Python iteration per frame even for the one or two tracks ``freeknots`` hands back.
 
 The first key sits at time 0 holding the value of the first active frame; the last key sits at time T (SMIL's
 keyTimes end at 1) and its value is free: any velocity in the final box extrapolates to a valid end, and zero
@@ -24,9 +25,12 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numba
 import numpy as np
 from scipy import sparse
 from scipy.linalg import solveh_banded
+
+from converter.encode import parallel
 
 
 class Keys(NamedTuple):
@@ -39,68 +43,75 @@ class Keys(NamedTuple):
 
 def reduce(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray) -> Keys:
     """Greedy keys on sampled values for tracks x (T, N, D), within eps per coordinate where active."""
-    x = np.asarray(x, np.float64)
+    x = np.ascontiguousarray(x, np.float64)
     t, n, d = x.shape
-    active = np.asarray(active, bool)
-    eps = np.broadcast_to(np.asarray(eps, np.float64), (n,))[:, None]
-    first = np.where(active.any(axis=0), np.argmax(active, axis=0), -1)
-    live = first >= 0
+    active = np.ascontiguousarray(active, bool)
+    eps = np.ascontiguousarray(np.broadcast_to(np.asarray(eps, np.float64), (n,)))
     mask = np.zeros((t + 1, n), bool)
-    values = np.zeros((t + 1, n, d), np.float64)
-    # Start: a key at time 0 holding the first active value (frames before it are hidden).
-    start_t = np.zeros(n, np.int64)
-    start_v = x[np.maximum(first, 0), np.arange(n)]
-    mask[0] = live
-    values[0] = start_v
-    lo = np.full((n, d), -np.inf)
-    hi = np.full((n, d), np.inf)
-    last_t = np.where(first == 0, 0, -1)  # latest active frame after the start (always a feasible end)
-    inv_dt = np.empty((n, 1))
-    for k in range(1, t):
-        act = active[k]
-        if not act.any():
-            continue
-        all_act = bool(act.all())
-        xk = x[k]
-        np.divide(1.0, (k - start_t)[:, None], out=inv_dt)
-        rel = xk - start_v
-        v = rel * inv_dt
-        reachable = ((v >= lo) & (v <= hi)).all(axis=1)
-        # Not reachable inside the box: the previous active frame becomes a key and the new start.
-        cut = act & ~reachable & (last_t > start_t)
-        if cut.any():
-            idx = np.flatnonzero(cut)
-            kt = last_t[idx]
-            end = x[kt, idx]
-            mask[kt, idx] = True
-            values[kt, idx] = end
-            start_t[idx] = kt
-            start_v[idx] = end
-            lo[idx] = -np.inf
-            hi[idx] = np.inf
-            inv_dt[idx] = 1.0 / (k - kt)[:, None]
-            rel[idx] = xk[idx] - end
-        new_lo = (rel - eps) * inv_dt
-        new_hi = (rel + eps) * inv_dt
-        if all_act:
-            np.maximum(lo, new_lo, out=lo)
-            np.minimum(hi, new_hi, out=hi)
-            last_t[:] = k
-        else:
-            sel = act[:, None]
-            np.copyto(lo, np.maximum(lo, new_lo), where=sel)
-            np.copyto(hi, np.minimum(hi, new_hi), where=sel)
-            last_t[act] = k
-    # Loop end: free value on the last segment. Zero velocity when the box allows it, else the velocity to the
-    # last active frame, which is always inside the box (and consistent across coordinates).
-    zero_ok = ((lo <= 0) & (hi >= 0)).all(axis=1)
-    has = last_t > start_t
-    span = np.where(has, last_t - start_t, 1)[:, None]
-    v_last = (x[np.maximum(last_t, 0), np.arange(n)] - start_v) / span
-    vel = np.where((zero_ok | ~has)[:, None], 0.0, v_last)
-    mask[t] = live
-    values[t] = start_v + (t - start_t)[:, None] * vel
+    values = np.zeros((t + 1, n, d))
+    first = np.full(n, -1, np.int64)
+    if n and t:
+        parallel.threaded(_reduce, n, x, active, eps, mask, values, first)
     return Keys(mask, values, first)
+
+
+@numba.njit(cache=True, nogil=True)
+def _reduce(x, active, eps, mask, values, first, j0, j1):
+    """reduce() of tracks j0..j1-1 into mask, values and first (the module docstring's box greedy, track by
+    track: the same arithmetic, so the same keys, as the loop over frames vectorised over tracks it replaced)."""
+    t, _, d = x.shape
+    lo = np.empty(d)
+    hi = np.empty(d)
+    for j in range(j0, j1):
+        f = -1
+        for k in range(t):
+            if active[k, j]:
+                f = k
+                break
+        first[j] = f
+        sk = max(f, 0)  # the start key's value is x[sk]: the first active frame's, then each cut's
+        s = 0  # the start key's time
+        mask[0, j] = f >= 0
+        for c in range(d):
+            values[0, j, c] = x[sk, j, c]
+            lo[c], hi[c] = -np.inf, np.inf
+        last = 0 if f == 0 else -1  # latest active frame after the start (always a feasible end)
+        for k in range(1, t):
+            if not active[k, j]:
+                continue
+            inv = 1.0 / (k - s)
+            reachable = True
+            for c in range(d):
+                v = (x[k, j, c] - x[sk, j, c]) * inv
+                if not (v >= lo[c] and v <= hi[c]):
+                    reachable = False
+            if not reachable and last > s:  # the previous active frame becomes a key and the new start
+                mask[last, j] = True
+                for c in range(d):
+                    values[last, j, c] = x[last, j, c]
+                    lo[c], hi[c] = -np.inf, np.inf
+                s = sk = last
+                inv = 1.0 / (k - s)
+            for c in range(d):
+                rel = x[k, j, c] - x[sk, j, c]
+                new_lo, new_hi = (rel - eps[j]) * inv, (rel + eps[j]) * inv
+                if new_lo > lo[c] or new_lo != new_lo:  # np.maximum / np.minimum, NaN included
+                    lo[c] = new_lo
+                if new_hi < hi[c] or new_hi != new_hi:
+                    hi[c] = new_hi
+            last = k
+        # Loop end: free value on the last segment. Zero velocity when the box allows it, else the velocity to
+        # the last active frame, which is always inside the box (and consistent across coordinates).
+        zero_ok = True
+        for c in range(d):
+            if not (lo[c] <= 0 and hi[c] >= 0):
+                zero_ok = False
+        has = last > s
+        span = last - s if has else 1
+        mask[t, j] = f >= 0
+        for c in range(d):
+            vel = 0.0 if zero_ok or not has else (x[max(last, 0), j, c] - x[sk, j, c]) / span
+            values[t, j, c] = x[sk, j, c] + (t - s) * vel
 
 
 def interpolate(keys: Keys, frames: np.ndarray | None = None) -> np.ndarray:
