@@ -36,6 +36,7 @@ import numpy as np
 from converter import playcost
 from converter.encode import collapse, freeknots, groups, merge
 from converter.encode import keys as keyframes
+from converter.encode import steps as held
 from converter.encode.budget import ErrorBudget, viewbox_scale
 from converter.encode.order import draw_list
 from converter.errors import InputError
@@ -53,7 +54,6 @@ BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus it
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
 KEY_TEXT_KEYS = 1 << 17  # keys whose d and keyTimes texts exist at once (a block of paths)
 RAW_COUNT_CELLS = 1 << 19  # vertex-frames per block when counting the raw encoding's bytes (~40 MB of temporaries)
-COLOR_ERROR_CELLS = 1 << 18  # frames x paths per block when measuring the colour error for the report
 RAW_WRITE_PATHS = 128  # paths per block when writing it (its one format call holds 18 objects per tri-frame)
 
 
@@ -249,53 +249,17 @@ def color_steps(rgb: np.ndarray, active: np.ndarray, tolerance: float,
     Why steps and not linear keys: Chromium re-evaluates an interpolated colour animation far more slowly than a
     discrete one (bench_playback: the sample's exact-colour file played 3x faster with the same values held), and
     the steps need about as many keys as the linear greedy within the same tolerance."""
-    t, p = active.shape
-    mask = np.zeros((t + 1, p), bool)
-    values = np.zeros((t + 1, p, 3), np.uint8)
-    if not t or not p:
-        return keyframes.Keys(mask, values, np.full(p, -1))
-    lo = np.full((p, 3), np.inf)
-    hi = np.full((p, 3), -np.inf)
-    start = np.zeros(p, np.int64)
-    cols = np.arange(p)
-
-    def hold(sel: np.ndarray) -> None:
-        mid = np.where(np.isfinite(lo[sel]), (lo[sel] + hi[sel]) / 2, 0.0)
-        mask[start[sel], cols[sel]] = True
-        values[start[sel], cols[sel]] = np.clip(np.rint(mid), 0, 255).astype(np.uint8)
-
-    for f in range(t):
-        a = active[f]
-        x = np.asarray(rgb[f] if paths is None else rgb[f, paths], np.float64) * 255
-        nlo, nhi = np.minimum(lo, x), np.maximum(hi, x)
-        cut = a & ((nhi - nlo).max(axis=1) / 2 + 0.5 > tolerance)  # frame f does not fit the held colour
-        if cut.any():
-            hold(np.flatnonzero(cut))
-            start[cut] = f
-        a3 = a[:, None]
-        lo = np.where(cut[:, None], x, np.where(a3, nlo, lo))
-        hi = np.where(cut[:, None], x, np.where(a3, nhi, hi))
-    hold(cols)
+    p = active.shape[1]
+    mask, values = held.hold(rgb, np.arange(p) if paths is None else paths, active, tolerance)
     return keyframes.Keys(mask, values, np.where(active.any(axis=0), np.argmax(active, axis=0), -1))
 
 
 def color_error(rgb: np.ndarray, active: np.ndarray, steps: keyframes.Keys,
                 paths: np.ndarray | None = None) -> np.ndarray:
     """Per shown (frame, path) the largest channel error in levels (float32) of the played colour (color_steps'
-    held values) against the exact shade rgb (T, P, 3) in 0..1 (or its columns paths), path-block-major; a block
-    of paths at a time."""
-    t, p = active.shape
-    out = []
-    block = max(1, COLOR_ERROR_CELLS // max(t, 1))
-    frame = np.arange(t)[:, None]
-    for a in range(0, p, block):
-        sl = slice(a, a + block)
-        held = np.maximum.accumulate(np.where(steps.mask[:t, sl], frame, 0), axis=0)
-        played = np.take_along_axis(steps.values[:t, sl], held[..., None], axis=0).astype(np.float64)
-        exact = rgb[:, sl] if paths is None else np.take(rgb, paths[sl], axis=1)
-        err = np.abs(np.asarray(exact, np.float64) * 255 - played).max(axis=-1)
-        out.append(err[active[:, sl]].astype(np.float32))
-    return np.concatenate(out) if out else np.zeros(0, np.float32)
+    held values) against the exact shade rgb (T, P, 3) in 0..1 (or its columns paths), path by path."""
+    p = active.shape[1]
+    return held.played_error(rgb, np.arange(p) if paths is None else paths, active, steps.mask, steps.values)
 
 
 def _discrete(attribute: str, codes: np.ndarray, names: list[str], kt: list[str], dur: str) -> list[str]:

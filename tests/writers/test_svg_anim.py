@@ -5,6 +5,7 @@ import gzip
 import re
 
 import numpy as np
+import pytest
 from lxml import etree
 
 from conftest import cube_animation
@@ -12,7 +13,7 @@ from converter import extract
 from converter.animation import FaceAnimation, Part
 from converter.convert import convert_animation
 from converter.encode.budget import viewbox_scale
-from converter.encode.keys import interpolate
+from converter.encode.keys import Keys, interpolate
 from converter.options import ConversionOptions, Report
 from converter.verify import _triangles_of_d, verify_animation
 from converter.writers import svg_anim
@@ -172,15 +173,53 @@ def test_colour_steps_hold_within_tolerance_with_the_fewest_steps():
     assert np.array_equal(np.sort(report_err), np.sort(err.T[active.T].astype(np.float32)))  # reported as float32
 
 
-def test_colour_error_in_blocks_is_the_error_in_one(monkeypatch):
-    rng = np.random.default_rng(3)
-    rgb = rng.random((30, 9, 3)).astype(np.float32)
-    active = rng.random((30, 9)) > 0.3
-    steps = svg_anim.color_steps(rgb, active, 3.0)
-    whole = svg_anim.color_error(rgb, active, steps)
-    monkeypatch.setattr(svg_anim, "COLOR_ERROR_CELLS", 60)  # two paths a block
-    blocks = svg_anim.color_error(rgb, active, steps)  # same errors; their order follows the blocks
-    assert np.array_equal(np.sort(blocks), np.sort(whole)) and len(whole) == active.sum() and whole.max() <= 3.0
+@pytest.mark.parametrize("seed", range(3))
+def test_compiled_colour_steps_are_the_vectorised_ones_and_errors_the_played_ones(seed):
+    rng = np.random.default_rng(seed)
+    t, n = int(rng.integers(1, 80)), int(rng.integers(1, 30))
+    rgb = np.clip(np.cumsum(rng.normal(0, 0.01, (t, n, 3)), axis=0) + rng.random((1, n, 3)), 0, 1)
+    rgb = rgb.astype(np.float32)
+    active = rng.random((t, n)) > rng.uniform(0, 0.8)
+    tolerance = float(rng.uniform(0.3, 4))
+    steps = svg_anim.color_steps(rgb, active, tolerance)
+    want = numpy_color_steps(rgb, active, tolerance)
+    assert all(np.array_equal(a, b) for a, b in zip(steps, want))
+    held = _held(steps, t)
+    err = np.abs(held - rgb.astype(np.float64) * 255).max(axis=-1)
+    got = svg_anim.color_error(rgb, active, steps)
+    assert np.array_equal(got, err.T[active.T].astype(np.float32))  # path by path
+
+
+def numpy_color_steps(rgb, active, tolerance, paths=None):
+    """svg_anim.color_steps as it was before it was compiled: a loop over frames vectorised over paths."""
+    t, p = active.shape
+    mask = np.zeros((t + 1, p), bool)
+    values = np.zeros((t + 1, p, 3), np.uint8)
+    if not t or not p:
+        return Keys(mask, values, np.full(p, -1))
+    lo = np.full((p, 3), np.inf)
+    hi = np.full((p, 3), -np.inf)
+    start = np.zeros(p, np.int64)
+    cols = np.arange(p)
+
+    def hold(sel: np.ndarray) -> None:
+        mid = np.where(np.isfinite(lo[sel]), (lo[sel] + hi[sel]) / 2, 0.0)
+        mask[start[sel], cols[sel]] = True
+        values[start[sel], cols[sel]] = np.clip(np.rint(mid), 0, 255).astype(np.uint8)
+
+    for f in range(t):
+        a = active[f]
+        x = np.asarray(rgb[f] if paths is None else rgb[f, paths], np.float64) * 255
+        nlo, nhi = np.minimum(lo, x), np.maximum(hi, x)
+        cut = a & ((nhi - nlo).max(axis=1) / 2 + 0.5 > tolerance)  # frame f does not fit the held colour
+        if cut.any():
+            hold(np.flatnonzero(cut))
+            start[cut] = f
+        a3 = a[:, None]
+        lo = np.where(cut[:, None], x, np.where(a3, nlo, lo))
+        hi = np.where(cut[:, None], x, np.where(a3, nhi, hi))
+    hold(cols)
+    return Keys(mask, values, np.where(active.any(axis=0), np.argmax(active, axis=0), -1))
 
 
 def test_colour_steps_and_errors_read_columns_of_the_sheet_without_a_copy():
