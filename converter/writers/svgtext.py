@@ -6,9 +6,6 @@ import re
 
 import numpy as np
 
-_TRAILING_ZEROS = re.compile(r"0+(?=\x00)")
-_TRAILING_POINT = re.compile(r"\.(?=\x00)")
-_LEADING_ZERO = re.compile(r"(?<=\x00)(-?)0\.")
 _MINUS_ZERO = re.compile(r"(?<=\x00)-0(?=\x00)")
 
 
@@ -25,17 +22,19 @@ def number(x: float, decimals: int) -> str:
 
 
 def numbers(values: np.ndarray, decimals: int) -> list[str]:
-    """number() of each value (flattened): one format call for all, trimmed by regular expressions over the
-    joined text. The same strings at about half the cost, joins included (a long capture's transforms and
-    keyTimes hold millions)."""
+    """number() of each value (flattened): one format call for all, trimmed by replacements over the joined text
+    (str.replace; a regular expression costs a Python call per match). The same strings at about half the cost
+    with the joins (a long capture's transforms and keyTimes hold millions)."""
     v = np.asarray(values, np.float64).ravel().tolist()
     if not v:
         return []
     text = "\x00" + (f"%.{int(decimals)}f\x00" * len(v)) % tuple(v)  # every item between two NULs
-    if decimals > 0:  # every item has a point: trailing zeros, then a bare point, go
-        text = _TRAILING_POINT.sub("", _TRAILING_ZEROS.sub("", text))
-    text = _MINUS_ZERO.sub("0", _LEADING_ZERO.sub(r"\1.", text))
-    return text[1:-1].split("\x00")
+    for _ in range(decimals):  # one trailing zero a pass: at most the decimals, so never an integer's
+        text = text.replace("0\x00", "\x00")
+    if decimals > 0:
+        text = text.replace(".\x00", "\x00")
+    text = text.replace("\x000.", "\x00.").replace("\x00-0.", "\x00-.")
+    return _MINUS_ZERO.sub("0", text)[1:-1].split("\x00")
 
 
 def key_times(frames: np.ndarray, n_frames: int, decimals: int | np.ndarray, snap: str = "nearest") -> list[str]:
