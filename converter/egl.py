@@ -69,6 +69,19 @@ def _display(egl):
 
 
 @contextmanager
+def _raster_threads(n: int | None) -> Iterator[None]:
+    """LP_NUM_THREADS=n for the block, when n is given and the environment does not already choose."""
+    if n is None or "LP_NUM_THREADS" in os.environ:
+        yield
+        return
+    os.environ["LP_NUM_THREADS"] = str(n)
+    try:
+        yield
+    finally:
+        del os.environ["LP_NUM_THREADS"]
+
+
+@contextmanager
 def render_errors(cleanup: Callable[[], None]) -> Iterator[None]:
     """Run the block; on any failure run cleanup() and raise a RenderError that names what to install."""
     try:
@@ -82,15 +95,20 @@ def render_errors(cleanup: Callable[[], None]) -> Iterator[None]:
 
 
 class EglContext:
-    """An OpenGL 4.1 core context, current on the calling thread from creation until close()."""
+    """An OpenGL 4.1 core context, current on the calling thread from creation until close().
 
-    def __init__(self) -> None:
+    raster_threads, when given, is llvmpipe's LP_NUM_THREADS for this display (unless the environment sets it):
+    0 rasterises on the calling thread. Mesa reads it when the display is initialised."""
+
+    def __init__(self, raster_threads: int | None = None) -> None:
         self._egl = self._display = self._context = None
         with render_errors(self.close):
             self._egl = egl = _egl()
             self._display = _display(egl)
             major, minor = egl.EGLint(), egl.EGLint()
-            if not self._display or not egl.eglInitialize(self._display, ctypes.byref(major), ctypes.byref(minor)):
+            with _raster_threads(raster_threads):
+                up = bool(self._display) and egl.eglInitialize(self._display, ctypes.byref(major), ctypes.byref(minor))
+            if not up:
                 raise RenderError(f"{EGL_HELP} (no EGL display could be initialised).")
             configs, count = (egl.EGLConfig * 1)(), egl.EGLint()
             attributes = (egl.EGLint * 13)(  # no depth: the id pass renders into its own framebuffer

@@ -68,7 +68,9 @@ class IdRenderer:
     """A reusable id render target: render(clip) -> (H, W) uint32 ids, 0 = background, face f = f + 1."""
 
     def __init__(self, width: int, height: int, faces: np.ndarray, n_vertices: int):
-        self._context = EglContext()
+        # Rasterised on this thread: a frame is small, and llvmpipe's helper threads cost ~20 % more CPU for the
+        # same wall time here (capture-like face, 335 frames: 1.07 -> 0.87 s CPU, 0.85 s wall either way).
+        self._context = EglContext(raster_threads=0)
         self.width, self.height, self.n_vertices = int(width), int(height), int(n_vertices)
         self.n_indices = int(faces.size)
         with render_errors(self.close):

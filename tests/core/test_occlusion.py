@@ -1,5 +1,6 @@
 """The occlusion pass keeps every visible triangle, however small, and drops the ones strictly behind (15.8)."""
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -169,3 +170,30 @@ def test_on_the_sample_every_pixel_owner_is_kept_and_fewer_visible_triangles_are
             owns_centre |= (np.bincount(ids[s // 2::s, s // 2::s].ravel(), minlength=f + 1)[1:] > 0) & vis[k]
     assert not (owns_centre & ~new).any()
     assert (seen_fine & ~new).sum() <= (seen_fine & ~old).sum()
+
+
+def test_the_id_pass_asks_llvmpipe_for_no_raster_threads_unless_the_environment_chooses(monkeypatch):
+    from converter import egl
+
+    monkeypatch.delenv("LP_NUM_THREADS", raising=False)
+    seen = []
+    with egl._raster_threads(0):
+        seen.append(os.environ.get("LP_NUM_THREADS"))
+    seen.append(os.environ.get("LP_NUM_THREADS"))
+    monkeypatch.setenv("LP_NUM_THREADS", "3")
+    with egl._raster_threads(0):
+        seen.append(os.environ.get("LP_NUM_THREADS"))
+    assert seen == ["0", None, "3"]
+    # Rasterising on one thread draws the same ids (llvmpipe is deterministic in its thread count).
+    cam = Camera(look_at(np.array([0.0, 0, 3]), np.zeros(3), np.array([0.0, 1, 0])),
+                 orthographic(-1, 1, -1, 1, 0.1, 10), 64, 64, True)
+    rng = np.random.default_rng(2)
+    verts = rng.uniform(-1, 1, (60, 3))
+    faces = rng.integers(0, 60, (40, 3)).astype(np.int32)
+    clip = idpass.clip_coords(cam, verts)
+    ids = []
+    for threads in ("2", "0"):  # the environment's choice wins over the id pass's 0
+        monkeypatch.setenv("LP_NUM_THREADS", threads)
+        with idpass.IdRenderer(64, 64, faces, 60) as r:
+            ids.append(r.render(clip).copy())
+    assert ids[0].any() and np.array_equal(ids[0], ids[1])
