@@ -29,7 +29,7 @@ BIG = 1e7  # bound of the unconstrained first value and of every velocity (px, p
 MAX_VERTS = 40  # polygon capacity; a segment whose polygon would outgrow it is cut early (still valid)
 ON_LINE = 1e-10  # relative distance below which a polygon vertex counts as on a cutting line
 SHAPES_DEG = (45.0, 30.0, 60.0)  # per path, the rectangle in each vertex's tolerance circle that needs fewest keys
-BLOCK_TRACKS = 1024  # at most this many tracks reduced together (bounds the scaled copy and the per-shape keys)
+BLOCK_TRACKS = 1024  # at most this many tracks reduced together (bounds the per-shape dense keys)
 BLOCK_CELLS = 1 << 18  # ... and at most about this many track-frames: a long capture takes fewer tracks a block
 SLACK = 1e-8  # the bound holds to eps + SLACK (eps + |x| + 1); tracks the final check rejects get sampled keys
 
@@ -88,10 +88,12 @@ def _slowest(poly, pi, n):
 
 
 @numba.njit(cache=True, nogil=True)
-def _reduce(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
-    """Free-knot keys of tracks first..stop-1 into mask and values; bad marks tracks that need
-    sampled keys. A track stops early (gave_up, no keys written) once it cannot end with fewer than limit keys."""
-    t, n, d = x.shape
+def _reduce(x, cols, scale, active, eps, limit, mask, values, bad, gave_up, first, stop):
+    """Free-knot keys of tracks first..stop-1 (columns cols of x, each coordinate times scale) into mask and
+    values (scaled back); bad marks tracks that need sampled keys. A track stops early (gave_up, no keys
+    written) once it cannot end with fewer than limit keys. x is read where it lies (no scaled copy)."""
+    t, d = x.shape[0], x.shape[2]
+    kv = np.empty((t + 1, d))  # the track's key values, scaled
     poly = np.empty((2 * d + 1, MAX_VERTS, 2))  # slot c: coordinate c's polygon; d + c: its next; 2d: scratch
     cnt = np.empty(d, np.int64)
     ncnt = np.empty(d, np.int64)
@@ -99,6 +101,7 @@ def _reduce(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
     seg_poly = np.empty(((t + 1) * d, MAX_VERTS, 2))  # segment i's polygon of coordinate c at i * d + c
     seg_cnt = np.empty((t + 1, d), np.int64)
     for j in range(first, stop):
+        col = cols[j]
         e = eps[j]
         s = 0
         last = -1
@@ -115,7 +118,8 @@ def _reduce(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
             for attempt in range(2):
                 ok = True
                 for c in range(d):
-                    lo, hi = x[k, j, c] - e, x[k, j, c] + e
+                    xv = x[k, col, c] * scale[c]
+                    lo, hi = xv - e, xv + e
                     q_lo, q_hi = np.inf, -np.inf
                     for i in range(cnt[c]):
                         q = poly[c, i, 0] + tau * poly[c, i, 1]
@@ -211,15 +215,14 @@ def _reduce(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
         mask[t, j] = True
         for c in range(d):
             p, v = _slowest(seg_poly, (nseg - 1) * d + c, seg_cnt[nseg - 1, c])
-            values[t, j, c] = p + v * (t - seg_t[nseg - 1])
-            values[seg_t[nseg - 1], j, c] = p
+            kv[t, c] = p + v * (t - seg_t[nseg - 1])
+            kv[seg_t[nseg - 1], c] = p
         mask[seg_t[nseg - 1], j] = True
         for i in range(nseg - 2, -1, -1):
             mask[seg_t[i], j] = True
             span = seg_t[i + 1] - seg_t[i]
             for c in range(d):
-                values[seg_t[i], j, c] = _on_line(seg_poly, i * d + c, seg_cnt[i, c], span,
-                                                  values[seg_t[i + 1], j, c])
+                kv[seg_t[i], c] = _on_line(seg_poly, i * d + c, seg_cnt[i, c], span, kv[seg_t[i + 1], c])
         # The bound, checked on what was built (numerical safety net).
         i = 0
         for k in range(t):
@@ -231,14 +234,20 @@ def _reduce(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
             b = seg_t[i + 1] if i + 1 < nseg else t
             f = (k - a) / (b - a)
             for c in range(d):
-                y = values[a, j, c] + f * (values[b, j, c] - values[a, j, c])
-                if abs(y - x[k, j, c]) > e + SLACK * (e + abs(x[k, j, c]) + 1.0):
+                y = kv[a, c] + f * (kv[b, c] - kv[a, c])
+                xv = x[k, col, c] * scale[c]
+                if abs(y - xv) > e + SLACK * (e + abs(xv) + 1.0):
                     bad[j] = True
+        if not bad[j]:  # the keys, scaled back (to values' dtype)
+            for i in range(nseg + 1):
+                kf = seg_t[i] if i < nseg else t
+                for c in range(d):
+                    values[kf, j, c] = kv[kf, c] / scale[c]
 
 
 def block_tracks(t: int) -> int:
-    """Tracks of t frames reduced together: BLOCK_TRACKS, fewer on long captures (their float64 copies, keys and
-    jitter would otherwise take hundreds of MB a block)."""
+    """Tracks of t frames reduced together: BLOCK_TRACKS, fewer on long captures (their dense keys and jitter
+    would otherwise take hundreds of MB a block)."""
     return min(BLOCK_TRACKS, max(16, BLOCK_CELLS // max(t, 1)))
 
 
@@ -249,30 +258,33 @@ def reduce_free(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray) -> k
                     np.where(np.any(active, axis=0), np.argmax(active, axis=0), -1))
     size = block_tracks(t)
     for a in range(0, n, size):
-        k, _ = _reduce_block(x[:, a:a + size], active[:, a:a + size],
-                             np.broadcast_to(np.asarray(eps, np.float64), (n,))[a:a + size], None)
+        k, _ = _reduce_block(x, active[:, a:a + size], np.broadcast_to(np.asarray(eps, np.float64), (n,))[a:a + size],
+                             None, cols=np.arange(a, min(a + size, n)))
         out.mask[:, a:a + size], out.values[:, a:a + size] = k.mask, k.values
     return out
 
 
 def _reduce_block(x: np.ndarray, active: np.ndarray, eps: np.ndarray, limit: np.ndarray | None,
-                  scale: np.ndarray | None = None) -> tuple[keys.Keys, np.ndarray]:
-    """reduce_free of the tracks x * scale (the keys' values scaled back), giving up (bool (N,), no keys) on each
-    track that cannot end with fewer than limit (N,) keys."""
-    x = np.ascontiguousarray(x if scale is None else x * scale, np.float64)
-    t, n, d = x.shape
+                  scale: np.ndarray | None = None, cols: np.ndarray | None = None,
+                  dtype: type = np.float64) -> tuple[keys.Keys, np.ndarray]:
+    """reduce_free of the tracks cols (default all) of x (T, N, D), each coordinate times scale (the keys' values
+    scaled back, as dtype), giving up (bool (n,), no keys) on each track that cannot end with fewer than limit (n,)
+    keys. active (T, n) and eps (n,) are the chosen tracks'."""
+    cols = np.arange(x.shape[1], dtype=np.int64) if cols is None else np.ascontiguousarray(cols, np.int64)
+    t, n, d = x.shape[0], len(cols), x.shape[2]
+    if x.dtype not in (np.float32, np.float64):
+        x = x.astype(np.float64)
+    scale = np.ones(d) if scale is None else np.ascontiguousarray(scale, np.float64)
     active = np.ascontiguousarray(active, bool)
     eps = np.ascontiguousarray(eps, np.float64)
     lim = np.full(n, np.iinfo(np.int64).max, np.int64) if limit is None else np.ascontiguousarray(limit, np.int64)
-    mask, values = np.zeros((t + 1, n), bool), np.zeros((t + 1, n, d))
+    mask, values = np.zeros((t + 1, n), bool), np.zeros((t + 1, n, d), dtype)
     bad, gave_up = np.zeros(n, bool), np.zeros(n, bool)
     if n and t:
-        parallel.threaded(_reduce, n, x, active, eps, lim, mask, values, bad, gave_up)
+        parallel.threaded(_reduce, n, x, cols, scale, active, eps, lim, mask, values, bad, gave_up)
     if bad.any():  # numerically awkward tracks: sampled keys, always valid
-        fb = keys.reduce(np.compress(bad, x, axis=1), np.compress(bad, active, axis=1), eps[bad])
-        mask[:, bad], values[:, bad] = fb.mask, fb.values
-    if scale is not None:
-        np.divide(values, scale, out=values)
+        fb = keys.reduce(np.take(x, cols[bad], axis=1) * scale, np.compress(bad, active, axis=1), eps[bad])
+        mask[:, bad], values[:, bad] = fb.mask, fb.values / scale
     return keys.Keys(mask, values, np.zeros(0, np.int64)), gave_up
 
 
@@ -292,7 +304,8 @@ def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
     """Free-knot keys for tracks of 2D points xy (T, N, 2m), each point within Euclidean radius where active;
     with best, per track whichever of best and the shapes' keys has fewest (best on ties; best's arrays are
     updated in place and returned). The values are stored as float32 (dense over T + 1 frames, they are the
-    encoder's largest array; budget.float_err covers the rounding); each block is reduced in float64.
+    encoder's largest array; budget.float_err covers the rounding); the tracks are read where they lie and
+    reduced in float64.
 
     Without best the first shape is reduced for every track. Unless exhaustive, a track then tries only the
     further shape nearest the lean of its jitter (``lean_deg``; the rectangle on its side of the square), and none
@@ -313,7 +326,8 @@ def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
     for b in range(0, n, size):  # blocks of tracks: the scaled copy, the keys and the lean stay small
         sl = slice(b, b + size)
         if base is not None:
-            k, _ = _reduce_block(xy[:, sl], active[:, sl], r[sl], None, _scale(base, m))
+            k, _ = _reduce_block(xy, active[:, sl], r[sl], None, _scale(base, m), np.arange(b, min(b + size, n)),
+                                 np.float32)
             best.mask[:, sl], best.values[:, sl] = k.mask, k.values
         nearest = None
         if not exhaustive and len(shapes) > 1:
@@ -326,8 +340,7 @@ def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
             if not len(idx):
                 continue
             limit = np.take(best.mask, idx, axis=1).sum(axis=0)
-            k, gave_up = _reduce_block(np.take(xy, idx, axis=1), np.take(active, idx, axis=1), r[idx], limit,
-                                       _scale(a, m))
+            k, gave_up = _reduce_block(xy, np.take(active, idx, axis=1), r[idx], limit, _scale(a, m), idx, np.float32)
             win = np.flatnonzero(~gave_up & (k.mask.sum(axis=0) < limit))
             best.mask[:, idx[win]], best.values[:, idx[win]] = k.mask[:, win], k.values[:, win]
     return best

@@ -529,7 +529,7 @@ def _plain_keys(xy: np.ndarray, faces: np.ndarray, tris: np.ndarray, active: np.
 
 def _tracks(xy: np.ndarray, faces: np.ndarray, tris: np.ndarray) -> np.ndarray:
     """Screen tracks (T, P, 6) px of the triangles tris, float32 as the Sheet stores them (the free-knot pass
-    works on float64 copies a block of tracks at a time)."""
+    reads them where they lie and works in float64)."""
     return np.asarray(np.take(xy, faces[tris], axis=1), np.float32).reshape(xy.shape[0], len(tris), 6)
 
 

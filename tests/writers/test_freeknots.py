@@ -76,7 +76,7 @@ def test_the_shape_tried_is_the_one_the_jitter_leans_towards():
     calls = []
     real = freeknots._reduce_block
     try:
-        freeknots._reduce_block = lambda x, *a, **k: calls.append(x.shape[1]) or real(x, *a, **k)
+        freeknots._reduce_block = lambda x, act, *a, **k: calls.append(act.shape[1]) or real(x, act, *a, **k)
         guided = freeknots.point_keys(x, active, 0.5)
     finally:
         freeknots._reduce_block = real
@@ -106,13 +106,27 @@ def test_still_hidden_and_never_active_tracks():
 def test_tracks_the_compiled_pass_rejects_get_sampled_keys(monkeypatch):
     x, active = noisy_sines(n=8)
 
-    def reject_all(x, active, eps, limit, mask, values, bad, gave_up, first, stop):
+    def reject_all(x, cols, scale, active, eps, limit, mask, values, bad, gave_up, first, stop):
         bad[first:stop] = True
 
     monkeypatch.setattr(freeknots, "_reduce", reject_all)
     keys = freeknots.reduce_free(x, active, 0.3)
     sampled = kf.reduce(x, active, 0.3)
     assert np.array_equal(keys.mask, sampled.mask) and np.array_equal(keys.values, sampled.values)
+
+
+def test_rejected_point_tracks_get_sampled_keys_scaled_back(monkeypatch):
+    x, active = noisy_sines(n=8)
+
+    def reject_all(x, cols, scale, active, eps, limit, mask, values, bad, gave_up, first, stop):
+        bad[first:stop] = True
+
+    monkeypatch.setattr(freeknots, "_reduce", reject_all)
+    keys = freeknots.point_keys(x, active, 0.3, freeknots.SHAPES_DEG[:1])
+    scale = freeknots._scale(freeknots.SHAPES_DEG[0], 3)
+    sampled = kf.reduce(x * scale, active, 0.3)
+    assert keys.values.dtype == np.float32 and np.array_equal(keys.mask, sampled.mask)
+    assert np.array_equal(keys.values, (sampled.values / scale).astype(np.float32))
 
 
 def test_same_keys_on_one_thread(monkeypatch):
