@@ -19,7 +19,7 @@ def fit_camera(anim: FaceAnimation, size: int = 512, yaw: float = 0.0, pitch: fl
                fov: float = 30.0, ortho: bool = False, frame_on: str | None = None) -> Camera:
     """The camera that frames the animation (every frame) from the chosen angle: see framing.resolve for what."""
     framed = framing.resolve(anim, frame_on)
-    frames = anim.frames if framed.vertices is None else np.take(anim.frames, framed.vertices, axis=1)
+    frames = anim.frames if framed.vertices is None else anim.frames[:, framed.vertices]  # a mask: not np.take
     return Camera.fit(frames, size=size, yaw=yaw + framed.yaw, pitch=pitch, fov=fov, ortho=ortho)
 
 
