@@ -323,7 +323,7 @@ def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
         base = None
     angles = np.array(shapes, np.float64)
     size = block_tracks(t)
-    for b in range(0, n, size):  # blocks of tracks: the scaled copy, the keys and the lean stay small
+    for b in range(0, n, size):  # blocks of tracks: the dense keys and the lean stay small
         sl = slice(b, b + size)
         if base is not None:
             k, _ = _reduce_block(xy, active[:, sl], r[sl], None, _scale(base, m), np.arange(b, min(b + size, n)),
