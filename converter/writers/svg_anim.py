@@ -42,6 +42,7 @@ from converter.encode.order import draw_list
 from converter.errors import InputError
 from converter.options import ConversionOptions, Report
 from converter.sheet import Sheet
+from converter.writers import svgtext
 from converter.writers.metadata import source_fields
 from converter.writers.svg_transforms import CLOSE, group_open
 from converter.writers.svgtext import key_times
@@ -144,11 +145,7 @@ def _path_strings(q: np.ndarray, offset: np.ndarray | None = None) -> list[str]:
     r[:, 4:6] = q[:, 4:6] - q[:, 2:4]
     if offset is not None:
         r[:, 0:2] -= offset
-    if not len(r):
-        return []
-    # One format call for every row; a minus sign doubles as the separator, so " -" becomes "-".
-    text = (("m%d %d %d %d %d %dz\x00" * len(r)) % tuple(r.ravel().tolist()))[:-1]
-    return text.replace(" -", "-").split("\x00")
+    return svgtext.subpaths(r)
 
 
 def _digits(v: np.ndarray) -> np.ndarray:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 
+import numba
 import numpy as np
 
 _MINUS_ZERO = re.compile(r"(?<=\x00)-0(?=\x00)")
@@ -28,6 +29,51 @@ def numbers(values: np.ndarray, decimals: int) -> list[str]:
         text = text.replace(".\x00", "\x00")
     text = text.replace("\x000.", "\x00.").replace("\x00-0.", "\x00-.")
     return _MINUS_ZERO.sub("0", text)[1:-1].split("\x00")
+
+
+def subpaths(rows: np.ndarray) -> list[str]:
+    """Integer rows (K, D) as 'm' and the integers, a space between two but none before a minus sign (it
+    separates them), then 'z': 'm12 5-3 4 0-1z'. Compiled: Python's % formatting of every integer was the
+    writer's text cost (2.1 s of 60 on 8k triangles x 3,000 frames)."""
+    rows = np.ascontiguousarray(rows, np.int64)
+    if not len(rows):
+        return []
+    width = len(str(int(np.abs(rows).max()))) + 2  # sign or space, digits
+    buf = np.empty(len(rows) * (3 + rows.shape[1] * width), np.uint8)
+    return buf[:_subpaths(rows, buf)].tobytes().decode("ascii").split("\x00")
+
+
+@numba.njit(cache=True, nogil=True)
+def _subpaths(rows, buf):
+    """subpaths() into buf (NUL between rows); returns the length written."""
+    pos = 0
+    for k in range(rows.shape[0]):
+        if k:
+            buf[pos] = 0
+            pos += 1
+        buf[pos] = 109  # m
+        pos += 1
+        for c in range(rows.shape[1]):
+            v = rows[k, c]
+            if v < 0:
+                buf[pos] = 45  # -
+                pos += 1
+                v = -v
+            elif c:
+                buf[pos] = 32
+                pos += 1
+            n = 1
+            x = v
+            while x >= 10:
+                x //= 10
+                n += 1
+            for i in range(n - 1, -1, -1):
+                buf[pos + i] = 48 + v % 10
+                v //= 10
+            pos += n
+        buf[pos] = 122  # z
+        pos += 1
+    return pos
 
 
 def key_times(frames: np.ndarray, n_frames: int, decimals: int | np.ndarray, snap: str = "nearest") -> list[str]:

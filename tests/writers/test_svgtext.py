@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from converter.writers.svgtext import key_times, number, numbers
+from converter.writers.svgtext import key_times, number, numbers, subpaths
 
 
 def reference_number(x: float, decimals: int) -> str:
@@ -44,3 +44,22 @@ def test_key_times_text_is_number_of_each_time():
     for dec in (2, 3, 4):
         assert key_times(frames, 300, dec) == [reference_number(round(f * 10**dec / 300) / 10**dec, dec)
                                                 for f in frames.tolist()]
+
+
+def reference_subpaths(rows: np.ndarray) -> list[str]:
+    """subpaths() as the writer formatted it before it was compiled: one % call, ' -' trimmed to '-'."""
+    one = "m" + " ".join(["%d"] * rows.shape[1]) + "z"
+    return [(one % tuple(r)).replace(" -", "-") for r in rows.tolist()]
+
+
+@pytest.mark.parametrize("width", [2, 6])
+def test_subpaths_match_percent_formatting(width):
+    rng = np.random.default_rng(width)
+    rows = rng.integers(-10, 10, (3000, width)) * 10 ** rng.integers(0, 12, (3000, width))
+    rows[::5] = 0
+    rows[1::7] = -1
+    rows[2] = [np.iinfo(np.int64).max] + [-(10 ** 17)] * (width - 1)
+    assert subpaths(rows) == reference_subpaths(rows)
+    assert subpaths(rows[:1]) == reference_subpaths(rows[:1])
+    assert subpaths(rows[:0]) == []
+    assert subpaths(np.array([[0, -5, 12, 0, -1, 3]])) == ["m0-5 12 0-1 3z"]
