@@ -3,7 +3,7 @@
 One EGL context (converter.egl, Mesa), one program, one framebuffer (an R32UI id renderbuffer and a
 depth renderbuffer, no multisampling) and one vertex buffer are made once and reused for every frame; a frame
 costs one glBufferSubData of the clip-space vertices, one draw and one glReadPixels of the ids (the depth is
-never read back). The ids mark a flag array by fancy indexing.
+never read back). A compiled loop marks the ids' faces.
 
 The rule (issue 15.8), in two parts:
 
@@ -36,6 +36,7 @@ import os
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
+import numba
 import numpy as np
 
 from converter.camera import Camera
@@ -157,14 +158,11 @@ def ever_seen(frames: np.ndarray, faces: np.ndarray, camera: Camera, visible: np
     t, f = frames.shape[0], faces.shape[0]
     kept = np.zeros(f, bool)
     faces64 = faces.astype(np.int64)
-    shown = np.zeros(f + 1, bool)  # per frame: which ids own a pixel (index 0: background)
     with IdRenderer(camera.width, camera.height, faces, frames.shape[1]) as r:
         for k in range(t):
             clip = clip_coords(camera, frames[k])
             ids = r.render(clip)
-            shown[:] = False
-            shown[ids.ravel().astype(np.intp)] = True  # 3x cheaper than np.bincount(...) > 0
-            kept |= shown[1:] & visible[k]
+            _mark(ids, visible[k], kept)
             cand = np.flatnonzero(visible[k] & ~kept)
             if cand.size:
                 w = clip[:, 3].astype(np.float64)
@@ -176,6 +174,18 @@ def ever_seen(frames: np.ndarray, faces: np.ndarray, camera: Camera, visible: np
             if progress:
                 progress((k + 1) / t)
     return kept
+
+
+@numba.njit(cache=True, nogil=True)
+def _mark(ids, visible, kept):
+    """kept[f] = True for each face f that owns a pixel of ids (H, W; f + 1, 0 the background) and is visible:
+    one pass over the ids (marking a flag array through ids.astype(intp) cost 1 ms a 512 px frame)."""
+    n = kept.shape[0]
+    for i in range(ids.shape[0]):
+        for j in range(ids.shape[1]):
+            v = ids[i, j]
+            if 0 < v <= n and visible[v - 1]:
+                kept[v - 1] = True
 
 
 def inradius(xy: np.ndarray, tri: np.ndarray) -> np.ndarray:
