@@ -1,9 +1,9 @@
 """Held colour steps, compiled: the greedy behind ``svg_anim.color_steps`` and the colour error it plays.
 
 Each path's frames are sequential (a step ends where a frame no longer fits the colour held), so both loops run
-one path at a time in numba, over the Sheet's colours as stored (float32 (T, N, 3) in 0..1, read through the
-paths' columns): the loop over frames vectorised over paths it replaced cost a Python iteration and a (P, 3)
-gather per frame, ~1 s a thousand frames on the capture-like face.
+in numba, frame by frame with each path's state held, over the Sheet's colours as stored (float32 (T, N, 3) in
+0..1, read through the paths' columns): the loop over frames vectorised over paths it replaced cost a Python
+iteration and a (P, 3) gather per frame, ~1 s a thousand frames on the capture-like face.
 """
 
 from __future__ import annotations
@@ -43,54 +43,57 @@ def played_error(rgb: np.ndarray, paths: np.ndarray, active: np.ndarray, mask: n
 
 @numba.njit(cache=True, nogil=True)
 def _hold(rgb, paths, active, tolerance, mask, values, first, stop):
-    """hold() of paths first..stop-1: the arithmetic of the vectorised loop it replaced, path by path."""
+    """hold() of paths first..stop-1: the arithmetic of the vectorised loop it replaced, frame by frame with
+    each path's step in progress held per path (a frame's colours are one row: read path by path over
+    thousands of frames, every read was a cache miss)."""
     t = active.shape[0]
-    lo = np.empty(3)
-    hi = np.empty(3)
+    n = stop - first
+    lo = np.full((n, 3), np.inf)
+    hi = np.full((n, 3), -np.inf)
+    start = np.zeros(n, np.int64)
     x = np.empty(3)
-    for j in range(first, stop):
-        col = paths[j]
-        start = 0
-        for c in range(3):
-            lo[c], hi[c] = np.inf, -np.inf
-        for f in range(t + 1):
+    for f in range(t + 1):
+        for k in range(n):
+            j = first + k
             if f < t:
                 a = active[f, j]
                 spread = -np.inf
                 for c in range(3):
-                    x[c] = np.float64(rgb[f, col, c]) * 255
-                    spread = max(spread, max(hi[c], x[c]) - min(lo[c], x[c]))
+                    x[c] = np.float64(rgb[f, paths[j], c]) * 255
+                    spread = max(spread, max(hi[k, c], x[c]) - min(lo[k, c], x[c]))
                 cut = a and spread / 2 + 0.5 > tolerance  # frame f does not fit the held colour
             else:
                 a, cut = False, True  # the loop end holds the last step
             if cut:
-                mask[start, j] = True
+                s = start[k]
+                mask[s, j] = True
                 for c in range(3):
-                    mid = (lo[c] + hi[c]) / 2 if np.isfinite(lo[c]) else 0.0
-                    values[start, j, c] = np.uint8(min(max(np.rint(mid), 0.0), 255.0))
-                start = f
+                    mid = (lo[k, c] + hi[k, c]) / 2 if np.isfinite(lo[k, c]) else 0.0
+                    values[s, j, c] = np.uint8(min(max(np.rint(mid), 0.0), 255.0))
+                start[k] = f
                 for c in range(3):
-                    lo[c], hi[c] = x[c], x[c]
+                    lo[k, c], hi[k, c] = x[c], x[c]
             elif a:
                 for c in range(3):
-                    lo[c], hi[c] = min(lo[c], x[c]), max(hi[c], x[c])
+                    lo[k, c], hi[k, c] = min(lo[k, c], x[c]), max(hi[k, c], x[c])
 
 
 @numba.njit(cache=True, nogil=True)
 def _error(rgb, paths, active, mask, values, at, out, first, stop):
-    """played_error() of paths first..stop-1 into out from at[j] on."""
+    """played_error() of paths first..stop-1 into out from at[j] on, frame by frame (as _hold)."""
     t = active.shape[0]
-    for j in range(first, stop):
-        col = paths[j]
-        i = at[j]
-        held = 0
-        for f in range(t):
+    n = stop - first
+    held = np.zeros(n, np.int64)
+    i = at[first:stop].copy()
+    for f in range(t):
+        for k in range(n):
+            j = first + k
             if mask[f, j]:
-                held = f
+                held[k] = f
             if not active[f, j]:
                 continue
             err = 0.0
             for c in range(3):
-                err = max(err, abs(np.float64(rgb[f, col, c]) * 255 - np.float64(values[held, j, c])))
-            out[i] = np.float32(err)
-            i += 1
+                err = max(err, abs(np.float64(rgb[f, paths[j], c]) * 255 - np.float64(values[held[k], j, c])))
+            out[i[k]] = np.float32(err)
+            i[k] += 1
