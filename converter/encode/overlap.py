@@ -14,7 +14,7 @@ import numpy as np
 
 from converter.encode import parallel
 
-OVERLAP_BLOCK = 8  # frames per block of the bounding-box candidate search
+OVERLAP_BLOCK = 16  # frames per candidate-search block: any size finds the same pairs; 16 was fastest (8k x 1,000: 1.1 s, 8: 1.3 s, 32: 1.35 s)
 STROKE_MARGIN_PX = 0.5  # two paths closer than this may share stroke pixels: their order is kept
 EMPTY = -1  # a free slot of a PairSet's table
 PAIRSET_BITS = 16  # a PairSet starts with 2^16 slots (512 KB) and doubles when half full

@@ -216,6 +216,9 @@ def test_overlap_pairs_match_every_pair_tested_by_brute_force(monkeypatch, grows
             if (near & ~overlap.apart(xy[:, i], xy[:, j], 0.5)).any():
                 want.add((i, j))
     assert len(want) > 20 and got == want
+    for block in (3, 16):  # the blocks only gather candidates: any size finds the same pairs
+        other = overlap.overlap_pairs(xy, active, block=block, margin=0.5, band=band)
+        assert {tuple(e) for e in other.tolist()} == want
     # The same paths given as vertex ids into a shared (T, V, 2) array (the planner's form): the same pairs.
     verts = xy.reshape(t, p * 3, 2)
     corners = np.arange(p * 3).reshape(p, 3)
