@@ -197,3 +197,106 @@ def test_the_id_pass_asks_llvmpipe_for_no_raster_threads_unless_the_environment_
         with idpass.IdRenderer(64, 64, faces, 60) as r:
             ids.append(r.render(clip).copy())
     assert ids[0].any() and np.array_equal(ids[0], ids[1])
+
+
+# --- rule 2 as numpy computed it before it was compiled: the compiled loop must keep exactly the same set ---------
+def _reference_ever_seen(frames, faces, camera, visible):
+    kept = np.zeros(faces.shape[0], bool)
+    faces64 = faces.astype(np.int64)
+    with idpass.IdRenderer(camera.width, camera.height, faces, frames.shape[1]) as r:
+        for k in range(frames.shape[0]):
+            clip = idpass.clip_coords(camera, frames[k])
+            ids = r.render(clip)
+            shown = np.zeros(faces.shape[0] + 1, bool)
+            shown[ids.ravel().astype(np.intp)] = True
+            kept |= shown[1:] & visible[k]
+            cand = np.flatnonzero(visible[k] & ~kept)
+            if cand.size:
+                w = clip[:, 3].astype(np.float64)
+                xy = np.empty((clip.shape[0], 2))
+                xy[:, 0] = (clip[:, 0] / w + 1) * 0.5 * camera.width
+                xy[:, 1] = (1 - clip[:, 1] / w) * 0.5 * camera.height
+                cand = cand[_inradius(xy, faces64[cand]) < idpass.INRADIUS_PX]
+                kept[cand] = _subpixel_kept(ids, xy, clip[:, 2] / w, faces64, cand)
+    return kept
+
+
+def _inradius(xy, tri):
+    p = xy[tri]
+    a, b, c = (np.linalg.norm(p[:, i] - p[:, j], axis=1) for i, j in ((1, 2), (2, 0), (0, 1)))
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    return np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) / np.maximum(a + b + c, 1e-12)
+
+
+def _subpixel_kept(ids, xy, z, faces, cand):
+    tri = faces[cand]
+    p = xy[tri]
+    cen = p.mean(axis=1)
+    z0_t, p0_t, g_t = _plane(p, z[tri])
+    kept = np.zeros(len(cand), bool)
+    for probe in (cen, *(idpass.PROBE_IN * cen + (1 - idpass.PROBE_IN) * p[:, i] for i in range(3))):
+        h, w = ids.shape
+        col = np.clip(np.floor(probe[:, 0]).astype(np.int64), 0, w - 1)
+        row = np.clip(np.floor(probe[:, 1]).astype(np.int64), 0, h - 1)
+        owner = ids[row, col].astype(np.int64) - 1
+        empty = owner < 0
+        otri = faces[np.where(empty, 0, owner)]
+        z0_o, p0_o, g_o = _plane(xy[otri], z[otri])
+        z_t = z0_t + ((probe - p0_t) * g_t).sum(axis=1)
+        z_o = z0_o + ((probe - p0_o) * g_o).sum(axis=1)
+        reach = np.hypot(probe[:, 0] - col - 0.5, probe[:, 1] - row - 0.5)
+        tol = idpass.SLACK * np.linalg.norm(g_t - g_o, axis=1) * reach + idpass.DEPTH_EPS
+        kept |= empty | (z_t <= z_o + tol)
+    return kept
+
+
+def _plane(p, z):
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    d1, d2 = z[:, 1] - z[:, 0], z[:, 2] - z[:, 0]
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    safe = np.where(np.abs(det) > 1e-12, det, np.inf)
+    return z[:, 0], p[:, 0], np.column_stack([(d1 * e2[:, 1] - d2 * e1[:, 1]) / safe,
+                                              (d2 * e1[:, 0] - d1 * e2[:, 0]) / safe])
+
+
+def test_compiled_sub_pixel_rule_keeps_what_numpy_kept():
+    # A soup of tiny triangles (many below a pixel) at random depths over a big one, moving over 12 frames: rule 2
+    # decides hundreds of them both ways, and the compiled loop must decide each as numpy did.
+    rng = np.random.default_rng(5)
+    n = 1500
+    centre = rng.uniform(4, 60, (n, 1, 2))
+    size = rng.uniform(0.05, 1.6, (n, 1, 1))
+    corners = centre + size * rng.normal(0, 1, (n, 3, 2))
+    depth = rng.uniform(-0.05, 0.05, (n, 1, 1)).repeat(3, 1)
+    soup = np.concatenate([corners, depth], axis=2)
+    drift = np.linspace(0, 3, 12)[:, None, None, None] * np.array([0.2, 0.1, 0.0])
+    soup = soup[None] + drift  # (T, n, 3, 3) pixel x, y and depth
+    big = np.array(BIG, np.float64)[None, None].repeat(12, 0)
+    world = np.stack([soup[..., 0] / SIZE * 2 - 1, 1 - soup[..., 1] / SIZE * 2, soup[..., 2]], axis=-1)
+    world = np.concatenate([big, world[..., ::-1, :]], axis=1)  # counter-clockwise, as _tri makes them
+    verts = world.reshape(12, -1, 3).astype(np.float32)
+    faces = np.arange(verts.shape[1], dtype=np.int32).reshape(-1, 3)
+    cam = _camera()
+    xy, z, w = cam.project(verts)
+    visible = cull(xy, z, w, faces, SIZE, SIZE)
+    got = idpass.ever_seen(verts, faces, cam, visible)
+    want = _reference_ever_seen(verts, faces, cam, visible)
+    assert np.array_equal(got, want)
+    # Rule 2 had work on both sides: triangles kept only by it, and sub-pixel ones it dropped.
+    centres = np.zeros(faces.shape[0], bool)
+    with idpass.IdRenderer(SIZE, SIZE, faces, verts.shape[1]) as r:
+        for k in range(12):
+            ids = np.unique(r.render(idpass.clip_coords(cam, verts[k])))
+            centres[ids[ids > 0] - 1] = True
+    assert (want & ~centres).sum() > 20 and (visible.any(axis=0) & ~want).sum() > 20
+
+
+def test_compiled_sub_pixel_rule_keeps_what_numpy_kept_on_the_sample():
+    from converter.extract import fit_camera
+    from converter.formats import load
+    anim = load(SAMPLE).sliced(0, 40)
+    cam = fit_camera(anim)
+    xy, z, w = cam.project(anim.frames)
+    visible = cull(xy, z, w, anim.faces, cam.width, cam.height)
+    got = idpass.ever_seen(anim.frames, anim.faces, cam, visible)
+    assert np.array_equal(got, _reference_ever_seen(anim.frames, anim.faces, cam, visible))
