@@ -14,9 +14,12 @@ import numpy as np
 
 from converter.encode import parallel
 
-# Frames per candidate-search block: any size finds the same pairs (the exact test decides per frame); 16 was
-# fastest on 8k triangles x 1,000 frames (1.1 s; 8: 1.3 s, 32: 1.35 s).
-OVERLAP_BLOCK = 16
+# Frames per candidate-search block: a block's boxes hold its frames' motion, so the best block is about as many
+# frames as a triangle takes to move its own size (any size finds the same pairs; the exact test decides per frame).
+# On the capture-like face (8 px triangles moving ~1 px a frame) 6-16 frames were equally fast, 2 or 24 a third
+# slower; on its 128k-triangle subdivision (2 px triangles) 2 frames took 8.2 s where 8 took 14.6 and 16 26.4.
+BLOCK_RANGE = (2, 32)
+MOTION_FRAMES = 50  # the motion a frame is the median over the first this many frames
 STROKE_MARGIN_PX = 0.5  # two paths closer than this may share stroke pixels: their order is kept
 EMPTY = -1  # a free slot of a PairSet's table
 PAIRSET_BITS = 16  # a PairSet starts with 2^16 slots (512 KB) and doubles when half full
@@ -229,7 +232,22 @@ def _add(table, shift, codes) -> int:
     return n
 
 
-def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP_BLOCK,
+def block_frames(xy_paths: np.ndarray, corners: np.ndarray | None = None) -> int:
+    """Frames per candidate-search block for overlap_pairs' tracks: the median triangle's size (largest side of its
+    box at frame 0) over the median distance a point moves in a frame (largest axis), within BLOCK_RANGE."""
+    head = xy_paths[:MOTION_FRAMES + 1]
+    first = np.take(head[0], corners, axis=0) if corners is not None else head[0]  # (P, 3, 2)
+    if not first.size or len(head) < 2:
+        return BLOCK_RANGE[0]
+    size = float(np.median((first.max(axis=1) - first.min(axis=1)).max(axis=1)))
+    step = float(np.median(np.abs(np.diff(head, axis=0)).max(axis=-1)))
+    ratio = size / step if step > 0 else np.inf
+    if not np.isfinite(ratio):  # nothing moves (or the positions are not finite): the widest block
+        return BLOCK_RANGE[1]
+    return int(np.clip(round(ratio), *BLOCK_RANGE))
+
+
+def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = None,
                   margin: float = STROKE_MARGIN_PX, band: np.ndarray | None = None,
                   corners: np.ndarray | None = None) -> np.ndarray:
     """(E, 2) path pairs i < j that may come within margin px of each other in a frame where both are drawn.
@@ -242,8 +260,10 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int = OVERLAP
     kept unless every such frame shows it apart, so the result is conservative. A pair found in one block is not
     tested again. A negative margin asks for pairs whose interiors overlap by more than -margin along every axis
     (converter.encode.order). With band (P,), only pairs of different bands are returned (``reorder`` keeps each
-    band's own order anyway). On the capture-like face this exact test halves the runs the box test alone leaves."""
+    band's own order anyway). On the capture-like face this exact test halves the runs the box test alone leaves.
+    block: frames per block (default ``block_frames``)."""
     t, p = active.shape
+    block = block_frames(xy_paths, corners) if block is None else block
     xy32 = xy_paths if corners is not None else np.asarray(xy_paths, np.float32)
     m32 = np.float32(margin)
     found = PairSet()

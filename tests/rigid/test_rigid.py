@@ -226,6 +226,19 @@ def test_overlap_pairs_match_every_pair_tested_by_brute_force(monkeypatch, grows
     assert {tuple(e) for e in shared.tolist()} == want
 
 
+def test_overlap_blocks_follow_how_far_a_triangle_moves_for_its_size():
+    # 6 px triangles moving 0.5 px a frame: a block of 12 frames; ten times the speed: 2 (the least); still: 32.
+    rng = np.random.default_rng(2)
+    tri = rng.uniform(0, 200, (40, 1, 2)) + np.array([[0, 0], [6, 0], [0, 6]])  # (P, 3, 2), 6 px boxes
+    for speed, want in ((0.5, 12), (5.0, 2), (0.0, 32)):
+        xy = tri[None] + speed * np.arange(30)[:, None, None, None] * np.array([1.0, 0.0])
+        assert overlap.block_frames(xy) == want
+        verts = xy.reshape(30, -1, 2)  # the same as vertex ids into a shared array
+        assert overlap.block_frames(verts, np.arange(120).reshape(40, 3)) == want
+    assert overlap.block_frames(np.full((5, 3, 3, 2), np.nan)) == 32
+    assert overlap.block_frames(np.zeros((1, 0, 3, 2))) == 2
+
+
 def test_plan_in_blocks_of_runs_is_the_plan_in_one(sheet, monkeypatch):
     """The plan works band-local tracks and keys out a block of runs at a time (memory): blocks of a few paths
     decide the same groups, tracks and keys as one block of every path."""
