@@ -50,6 +50,7 @@ from scipy.cluster.vq import kmeans2
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import LinearOperator, eigsh
 
+from converter.arrays import unique_ints
 from converter.encode import freeknots
 from converter.encode import keys as keyframes
 from converter.encode.budget import ErrorBudget
@@ -175,7 +176,7 @@ def merge_by_motion(piece: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutra
     out = piece.copy()
     rank = np.argsort(-sizes, kind="stable")
     for pid, size in zip(ids[rank].tolist(), sizes[rank].tolist()):
-        verts = np.unique(faces[piece == pid])
+        verts = unique_ints(faces[piece == pid])
         ref = xy[neutral, verts]
         errors = []
         for _, fit, centre in bands:
@@ -375,13 +376,13 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
     small = max(SMALL_BAND_TRIANGLES, int(SMALL_BAND_SHARE * len(faces)))
     merged = merge_by_motion(components(faces, part_ids), faces, xy64, neutral, MERGE_PX, small)
     ids, sizes = np.unique(merged, return_counts=True)
-    head = _motion(xy64, np.unique(faces[merged == ids[np.argmax(sizes)]]), neutral, HEAD_SHARE * tolerance,
+    head = _motion(xy64, unique_ints(faces[merged == ids[np.argmax(sizes)]]), neutral, HEAD_SHARE * tolerance,
                    scale, kt_decimals)
     in_head = local_tracks(xy64[:, :, None, :], head.matrices)[:, :, 0]  # head frame px, about its centroid
     del xy64  # the rest works in the head's frame (and the overlap test on the float32 xy)
     band_of_tri = motion_clusters(merged, faces, in_head, neutral, head_clusters)
     band_ids, band = np.unique(band_of_tri[tris], return_inverse=True)
-    motions = _motions(in_head, [np.unique(faces[band_of_tri == b]) for b in band_ids.tolist()], neutral,
+    motions = _motions(in_head, [unique_ints(faces[band_of_tri == b]) for b in band_ids.tolist()], neutral,
                        BAND_SHARE * tolerance, scale, kt_decimals)
     order = np.arange(len(tris))
     if merge_runs and len(tris) > 1:

@@ -32,6 +32,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy import sparse
 
+from converter.arrays import unique_ints
 from converter.encode.overlap import overlap_pairs
 from converter.sheet import Sheet
 
@@ -69,7 +70,7 @@ def greedy_order(key: np.ndarray, pairs: np.ndarray, switch: Callable[[dict[int,
     draws runs of one key: the current key goes on while one of its paths is free (the lowest index first),
     then switch(free) names the next key (free: key -> heap of its free paths, some empty)."""
     p = len(key)
-    code = np.unique(np.asarray(pairs, np.int64).reshape(-1, 2) @ np.array([p, 1]))
+    code = unique_ints(np.asarray(pairs, np.int64).reshape(-1, 2) @ np.array([p, 1]))
     pairs = np.column_stack([code // p, code % p])
     succ = sparse.csr_matrix((np.ones(len(pairs), bool), (pairs[:, 0], pairs[:, 1])), shape=(p, p))
     indeg = np.bincount(pairs[:, 1], minlength=p) if len(pairs) else np.zeros(p, np.int64)
