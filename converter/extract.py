@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from converter import framing, idpass, render
@@ -24,24 +25,39 @@ def fit_camera(anim: FaceAnimation, size: int = 512, yaw: float = 0.0, pitch: fl
 
 
 def cull(xy: np.ndarray, ndc_z: np.ndarray, w: np.ndarray, faces: np.ndarray, width: int, height: int) -> np.ndarray:
-    """Bool (T, F): whole-triangle view-frustum culling plus back-face culling (front = counter-clockwise in GL)."""
-    x, y = xy[..., 0], xy[..., 1]
-    f0, f1, f2 = faces[:, 0], faces[:, 1], faces[:, 2]
-    ax, ay = np.take(x, f0, axis=1), np.take(y, f0, axis=1)
-    # Screen y points down, so a counter-clockwise (front) triangle has a negative signed area here.
-    x1, y1, x2, y2 = (np.take(a, f, axis=1) for a, f in ((x, f1), (y, f1), (x, f2), (y, f2)))
-    area2 = (x1 - ax) * (y2 - ay) - (y1 - ay) * (x2 - ax)
-    # Per vertex, one bit per side of the view volume it lies beyond and one for not in front of the eye: a
-    # triangle is outside when its three corners share a side, behind when one corner is. (Bits per vertex,
-    # then three uint8 gathers: (T, F, 3) gathers and .all(-1) cost 10x more on long clips.)
-    bits = np.zeros(x.shape, np.uint8)
-    for i, out in enumerate((x < 0, x > width, y < 0, y > height, ndc_z < -1, ndc_z > 1)):
-        bits |= out.view(np.uint8) << np.uint8(i)
-    bits |= (~(w > 0)).view(np.uint8) << np.uint8(7)
-    b0, b1, b2 = (np.take(bits, f, axis=1) for f in (f0, f1, f2))
-    outside = (b0 & b1 & b2 & np.uint8(63)) != 0
-    behind = ((b0 | b1 | b2) & np.uint8(128)) != 0
-    return (area2 < 0) & ~behind & ~outside
+    """Bool (T, F): whole-triangle view-frustum culling plus back-face culling (front = counter-clockwise in GL).
+
+    A triangle is outside when its three corners lie beyond one side of the view volume, behind when one corner
+    is not in front of the eye (w <= 0). Compiled, one pass per frame over its vertices (a bit per side) and one
+    over its faces: as numpy's gathers and passes over (T, F) arrays it cost 80 ns a triangle-frame (3.4 s on the
+    128k-triangle bench face, ~9 s on the 4,000-frame ICT head). The arithmetic is numpy's, operation for
+    operation (tests/core/test_camera.py keeps that version)."""
+    lead = ndc_z.shape[:-1]
+    v = ndc_z.shape[-1]
+    out = np.empty(lead + (len(faces),), bool)
+    _cull(np.ascontiguousarray(xy).reshape(-1, v, 2), np.ascontiguousarray(ndc_z).reshape(-1, v),
+          np.ascontiguousarray(w).reshape(-1, v), np.ascontiguousarray(faces, np.int64), width, height,
+          out.reshape(-1, len(faces)))
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _cull(xy, ndc_z, w, faces, width, height, out):
+    """cull() of frames (T, V) into out (T, F)."""
+    bits = np.empty(ndc_z.shape[1], np.uint8)
+    for k in range(ndc_z.shape[0]):
+        for i in range(ndc_z.shape[1]):
+            x, y, z = xy[k, i, 0], xy[k, i, 1], ndc_z[k, i]
+            b = (x < 0) | (x > width) << 1 | (y < 0) << 2 | (y > height) << 3 | (z < -1) << 4 | (z > 1) << 5
+            bits[i] = b | (not w[k, i] > 0) << 7
+        for f in range(faces.shape[0]):
+            i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+            ax, ay = xy[k, i0, 0], xy[k, i0, 1]
+            # Screen y points down, so a counter-clockwise (front) triangle has a negative signed area here.
+            area2 = (xy[k, i1, 0] - ax) * (xy[k, i2, 1] - ay) - (xy[k, i1, 1] - ay) * (xy[k, i2, 0] - ax)
+            outside = (bits[i0] & bits[i1] & bits[i2] & 63) != 0
+            behind = ((bits[i0] | bits[i1] | bits[i2]) & 128) != 0
+            out[k, f] = area2 < 0 and not behind and not outside
 
 
 def painter_order(depth: np.ndarray, faces: np.ndarray, candidates: np.ndarray, frame: int) -> np.ndarray:

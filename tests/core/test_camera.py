@@ -143,3 +143,43 @@ def test_extent_equals_numpy_min_max(n):
     lo, hi = _extent(pts)
     assert lo.dtype == np.float64
     assert np.array_equal(lo, pts.min(axis=0)) and np.array_equal(hi, pts.max(axis=0))
+
+
+def numpy_cull(xy, ndc_z, w, faces, width, height):
+    """extract.cull as numpy computed it before it was compiled (the reference)."""
+    x, y = xy[..., 0], xy[..., 1]
+    f0, f1, f2 = faces[:, 0], faces[:, 1], faces[:, 2]
+    ax, ay = np.take(x, f0, axis=-1), np.take(y, f0, axis=-1)
+    x1, y1, x2, y2 = (np.take(a, f, axis=-1) for a, f in ((x, f1), (y, f1), (x, f2), (y, f2)))
+    area2 = (x1 - ax) * (y2 - ay) - (y1 - ay) * (x2 - ax)
+    bits = np.zeros(x.shape, np.uint8)
+    for i, out in enumerate((x < 0, x > width, y < 0, y > height, ndc_z < -1, ndc_z > 1)):
+        bits |= out.view(np.uint8) << np.uint8(i)
+    bits |= (~(w > 0)).view(np.uint8) << np.uint8(7)
+    b0, b1, b2 = (np.take(bits, f, axis=-1) for f in (f0, f1, f2))
+    outside = (b0 & b1 & b2 & np.uint8(63)) != 0
+    behind = ((b0 | b1 | b2) & np.uint8(128)) != 0
+    return (area2 < 0) & ~behind & ~outside
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_compiled_cull_is_the_numpy_cull(dtype):
+    # Random triangles over and past a 64 px view, vertices on its edges, behind the eye, beyond near and far,
+    # degenerate (collinear, repeated) and not finite.
+    rng = np.random.default_rng(7)
+    t, v, f = 6, 400, 1500
+    xy = rng.uniform(-20, 84, (t, v, 2))
+    xy[:, ::17, 0] = rng.choice([0.0, 64.0], (t, len(range(0, v, 17))))
+    xy[:, 1::19] = np.round(xy[:, 1::19])  # on a grid: many exactly collinear triples
+    xy[:, 5::53] = np.nan
+    ndc_z = rng.uniform(-1.3, 1.3, (t, v))
+    ndc_z[:, ::23] = rng.choice([-1.0, 1.0], (t, len(range(0, v, 23))))
+    w = rng.uniform(-0.2, 2, (t, v))
+    faces = rng.integers(0, v, (f, 3))
+    faces[::31, 1] = faces[::31, 0]
+    xy, ndc_z, w = xy.astype(dtype), ndc_z.astype(dtype), w.astype(dtype)
+    got = cull(xy, ndc_z, w, faces, 64, 64)
+    want = numpy_cull(xy, ndc_z, w, faces, 64, 64)
+    assert got.shape == (t, f) and np.array_equal(got, want)
+    assert 0.1 < want.mean() < 0.5  # both outcomes, often
+    assert np.array_equal(cull(xy[2], ndc_z[2], w[2], faces, 64, 64), want[2])  # one frame, no frame axis
