@@ -20,6 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from converter.arrays import lexsort_ints
 from converter.encode.keys import Keys
 
 FOLD_CELLS = 1 << 22  # path-frames folded at a time
@@ -115,7 +116,7 @@ def _fold(keys: Keys, active: np.ndarray) -> Timeline:
     half = np.concatenate([2 * fk[keep], 2 * vf, c_start, c_end])
     values = np.concatenate([vals[keep], vv, point_a, point_b])
     collapsed = np.concatenate([np.zeros(int(keep.sum()) + len(vp), bool), np.ones(2 * len(rp), bool)])
-    order = _key_order(path, half, collapsed, p, t)
+    order = lexsort_ints((collapsed, half, path))
     path, half = path[order], half[order]
     dup = np.zeros(len(path), bool)
     dup[1:] = (path[1:] == path[:-1]) & (half[1:] == half[:-1])  # an edge frame that was already a key
@@ -124,15 +125,6 @@ def _fold(keys: Keys, active: np.ndarray) -> Timeline:
     path, half, values, collapsed = path[keep], half[keep], values[order], collapsed[order]
     same = path[1:] == path[:-1]
     return Timeline(path, half, values, collapsed, snaps(collapsed, same))
-
-
-def _key_order(path: np.ndarray, half: np.ndarray, collapsed: np.ndarray, p: int, t: int) -> np.ndarray:
-    """np.lexsort((collapsed, half, path)) for path < p and half <= 2t: one stable argsort of the three packed
-    into an int64 (2.5x faster on a long capture's millions of keys)."""
-    if p >= 1 << 30 or 2 * t >= 1 << 32:
-        return np.lexsort((collapsed, half, path))
-    packed = (path.astype(np.int64) << 33) | (half.astype(np.int64) << 1) | collapsed
-    return np.argsort(packed, kind="stable")
 
 
 def snaps(collapsed: np.ndarray, same: np.ndarray) -> np.ndarray:

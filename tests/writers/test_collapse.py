@@ -99,11 +99,3 @@ def test_playback_classes_order_by_cost():
     assert playcost.playback_class(light) == playcost.CLASSES[0][1]
     assert playcost.playback_class(heavy) == playcost.HEAVY
 
-
-def test_key_order_is_lexsort_ties_included():
-    rng = np.random.default_rng(3)
-    path, half = rng.integers(0, 40, 4000), rng.integers(0, 61, 4000)  # many equal (path, half, collapsed)
-    collapsed = rng.random(4000) < 0.3
-    want = np.lexsort((collapsed, half, path))
-    assert np.array_equal(collapse._key_order(path, half, collapsed, 40, 30), want)
-    assert np.array_equal(collapse._key_order(path, half, collapsed, 1 << 30, 30), want)  # too wide: lexsort
