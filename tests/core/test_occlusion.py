@@ -273,7 +273,7 @@ def test_compiled_sub_pixel_rule_keeps_what_numpy_kept():
     soup = soup[None] + drift  # (T, n, 3, 3) pixel x, y and depth
     big = np.array(BIG, np.float64)[None, None].repeat(12, 0)
     world = np.stack([soup[..., 0] / SIZE * 2 - 1, 1 - soup[..., 1] / SIZE * 2, soup[..., 2]], axis=-1)
-    world = np.concatenate([big, world[..., ::-1, :]], axis=1)  # counter-clockwise, as _tri makes them
+    world = np.concatenate([big, world[..., ::-1, :]], axis=1)  # corners reversed as _tri does (random: half face away)
     verts = world.reshape(12, -1, 3).astype(np.float32)
     faces = np.arange(verts.shape[1], dtype=np.int32).reshape(-1, 3)
     cam = _camera()
