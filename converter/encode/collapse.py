@@ -120,9 +120,9 @@ def _fold(keys: Keys, active: np.ndarray) -> Timeline:
     path, half = path[order], half[order]
     dup = np.zeros(len(path), bool)
     dup[1:] = (path[1:] == path[:-1]) & (half[1:] == half[:-1])  # an edge frame that was already a key
-    keep = ~dup
-    order = order[keep]  # one gather of the values, sorted and deduplicated at once
-    path, half, values, collapsed = path[keep], half[keep], values[order], collapsed[order]
+    single = ~dup
+    order = order[single]  # one gather of the values, sorted and deduplicated at once
+    path, half, values, collapsed = path[single], half[single], values[order], collapsed[order]
     same = path[1:] == path[:-1]
     return Timeline(path, half, values, collapsed, snaps(collapsed, same))
 
