@@ -94,7 +94,11 @@ def _reduce(x, cols, scale, active, eps, limit, mask, values, bad, gave_up, firs
     written) once it cannot end with fewer than limit keys. x is read where it lies (no scaled copy)."""
     t, d = x.shape[0], x.shape[2]
     kv = np.empty((t + 1, d))  # the track's key values, scaled
-    poly = np.empty((2 * d + 1, MAX_VERTS, 2))  # slot c: coordinate c's polygon; d + c: its next; 2d: scratch
+    poly = np.empty((2 * d + 1, MAX_VERTS, 2))  # coordinate c's polygon in slot cur[c], its next in the other of
+    # c and d + c (the two swap, nothing is copied); 2d: scratch
+    cur = np.empty(d, np.int64)
+    nxt = np.empty(d, np.int64)
+    qs = np.empty((2, MAX_VERTS))  # p + tau v of the polygon being cut (row 0) and of the scratch (row 1)
     cnt = np.empty(d, np.int64)
     ncnt = np.empty(d, np.int64)
     seg_t = np.empty(t + 1, np.int64)
@@ -107,6 +111,7 @@ def _reduce(x, cols, scale, active, eps, limit, mask, values, bad, gave_up, firs
         last = -1
         nseg = 0
         for c in range(d):
+            cur[c] = c
             cnt[c] = _rect(poly, c, -BIG, BIG)
         for k in range(t):
             if not active[k, j]:
@@ -120,9 +125,11 @@ def _reduce(x, cols, scale, active, eps, limit, mask, values, bad, gave_up, firs
                 for c in range(d):
                     xv = x[k, col, c] * scale[c]
                     lo, hi = xv - e, xv + e
+                    pc = cur[c]
                     q_lo, q_hi = np.inf, -np.inf
                     for i in range(cnt[c]):
-                        q = poly[c, i, 0] + tau * poly[c, i, 1]
+                        q = poly[pc, i, 0] + tau * poly[pc, i, 1]
+                        qs[0, i] = q
                         q_lo, q_hi = min(q_lo, q), max(q_hi, q)
                     m = -1  # the strip holds all of it: unchanged
                     if q_hi < lo or q_lo > hi:
@@ -131,39 +138,48 @@ def _reduce(x, cols, scale, active, eps, limit, mask, values, bad, gave_up, firs
                         # Cut by the side(s) it crosses, hi first (into the scratch slot when lo cuts too). A vertex
                         # within ON_LINE of a line counts as on it: kept, and no new vertex is made next to it.
                         # Without that, rounding adds near-copies of vertices at every cut and the polygons
-                        # outgrow MAX_VERTS.
-                        src, m = c, cnt[c]
+                        # outgrow MAX_VERTS. A vertex's signed distance sgn (q - cut) is its p + tau v less the line,
+                        # the same bits as sgn p + sgn tau v - sgn cut.
+                        nxt[c] = pc + d if pc < d else pc - d
+                        src, srow, m = pc, 0, cnt[c]
                         for side in range(2):
                             if side == 0:
                                 if q_hi <= hi:
                                     continue
-                                a, b, cut = 1.0, tau, hi
-                                dst = 2 * d if q_lo < lo else d + c
+                                sgn, cut = 1.0, hi
+                                dst = 2 * d if q_lo < lo else nxt[c]
                             else:
                                 if q_lo >= lo:
                                     continue
-                                a, b, cut = -1.0, -tau, -lo
-                                dst = d + c
+                                sgn, cut = -1.0, lo
+                                dst = nxt[c]
                             n_src, m = m, 0
                             tol = ON_LINE * (abs(cut) + 1.0)
+                            gj = sgn * (qs[srow, 0] - cut)
                             for i in range(n_src):
                                 i2 = i + 1 if i + 1 < n_src else 0
-                                gi = a * poly[src, i, 0] + b * poly[src, i, 1] - cut
-                                gj = a * poly[src, i2, 0] + b * poly[src, i2, 1] - cut
+                                gi = gj
+                                gj = sgn * (qs[srow, i2] - cut)
                                 if gi <= tol:
                                     if m < MAX_VERTS:
                                         poly[dst, m, 0] = poly[src, i, 0]
                                         poly[dst, m, 1] = poly[src, i, 1]
+                                        if side == 0:
+                                            qs[1, m] = qs[srow, i]
                                     m += 1
                                 if (gi < -tol and gj > tol) or (gi > tol and gj < -tol):
                                     f = gi / (gi - gj)
                                     if m < MAX_VERTS:
-                                        poly[dst, m, 0] = poly[src, i, 0] + f * (poly[src, i2, 0] - poly[src, i, 0])
-                                        poly[dst, m, 1] = poly[src, i, 1] + f * (poly[src, i2, 1] - poly[src, i, 1])
+                                        pn = poly[src, i, 0] + f * (poly[src, i2, 0] - poly[src, i, 0])
+                                        vn = poly[src, i, 1] + f * (poly[src, i2, 1] - poly[src, i, 1])
+                                        poly[dst, m, 0] = pn
+                                        poly[dst, m, 1] = vn
+                                        if side == 0:
+                                            qs[1, m] = pn + tau * vn
                                     m += 1
                             if m == 0 or m > MAX_VERTS:
                                 break
-                            src = dst
+                            src, srow = dst, 1
                     ncnt[c] = m
                     if m == 0 or m > MAX_VERTS - 4:
                         ok = False
@@ -172,9 +188,7 @@ def _reduce(x, cols, scale, active, eps, limit, mask, values, bad, gave_up, firs
                     for c in range(d):
                         if ncnt[c] > 0:
                             cnt[c] = ncnt[c]
-                            for i in range(ncnt[c]):
-                                poly[c, i, 0] = poly[d + c, i, 0]
-                                poly[c, i, 1] = poly[d + c, i, 1]
+                            cur[c] = nxt[c]
                     break
                 if attempt == 1 or last <= s:
                     bad[j] = True  # on the second attempt it cannot happen with a free velocity: safety net only
@@ -183,14 +197,15 @@ def _reduce(x, cols, scale, active, eps, limit, mask, values, bad, gave_up, firs
                 seg_t[nseg] = s
                 span = last - s
                 for c in range(d):
+                    pc = cur[c]
                     seg_cnt[nseg, c] = cnt[c]
                     lo, hi = np.inf, -np.inf
                     for i in range(cnt[c]):
-                        seg_poly[nseg * d + c, i, 0] = poly[c, i, 0]
-                        seg_poly[nseg * d + c, i, 1] = poly[c, i, 1]
-                        y = poly[c, i, 0] + span * poly[c, i, 1]
+                        seg_poly[nseg * d + c, i, 0] = poly[pc, i, 0]
+                        seg_poly[nseg * d + c, i, 1] = poly[pc, i, 1]
+                        y = poly[pc, i, 0] + span * poly[pc, i, 1]
                         lo, hi = min(lo, y), max(hi, y)
-                    cnt[c] = _rect(poly, c, lo, hi)
+                    cnt[c] = _rect(poly, pc, lo, hi)
                 nseg += 1
                 s = last
                 tau = k - s
@@ -208,8 +223,8 @@ def _reduce(x, cols, scale, active, eps, limit, mask, values, bad, gave_up, firs
         for c in range(d):
             seg_cnt[nseg, c] = cnt[c]
             for i in range(cnt[c]):
-                seg_poly[nseg * d + c, i, 0] = poly[c, i, 0]
-                seg_poly[nseg * d + c, i, 1] = poly[c, i, 1]
+                seg_poly[nseg * d + c, i, 0] = poly[cur[c], i, 0]
+                seg_poly[nseg * d + c, i, 1] = poly[cur[c], i, 1]
         nseg += 1
         # Backward: the loop-end key with the slowest last segment, then each key mid-way along its chord.
         mask[t, j] = True
