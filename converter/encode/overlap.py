@@ -12,6 +12,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from converter.arrays import lexsort_ints
 from converter.encode import parallel
 
 # Frames per candidate-search block: a block's boxes hold its frames' motion, so the best block is about as many
@@ -112,9 +113,10 @@ def _boxes(pts, on, grow):
     return lo - grow, hi + grow
 
 
-def _cell_lists(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _cell_lists(lo: np.ndarray, hi: np.ndarray, cell: float,
+                band: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Boxes [lo, hi] (N, 2) on a grid of side cell: (cell key, box) for every cell a box covers, sorted by
-    key, and each box's lowest cell (N, 2)."""
+    key, then by band (N,) when given, then by box; and each box's lowest cell (N, 2)."""
     c0 = np.floor(lo / cell).astype(np.int64)
     span = np.floor(hi / cell).astype(np.int64) - c0 + 1
     n_cells = span[:, 0] * span[:, 1]
@@ -124,7 +126,8 @@ def _cell_lists(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray
     cx = np.repeat(c0[:, 0], n_cells) + local % sx
     cy = np.repeat(c0[:, 1], n_cells) + local // sx
     key = _cell_key(cx, cy, c0[:, 0].min(), c0[:, 1].min())
-    order = np.lexsort((owner, key))
+    # Both sorts are stable and owner rises already, so a cell's boxes (of one band) stay in owner order.
+    order = np.argsort(key, kind="stable") if band is None else lexsort_ints((band[owner], key))
     return key[order], owner[order], c0
 
 
@@ -136,7 +139,10 @@ def _cell_key(cx, cy, x0, y0):
 
 @numba.njit(cache=True, nogil=True)
 def _candidates(key, owner, c0, band, lo, hi, out) -> int:
-    """Pairs (a < b) of boxes of different band that meet, into out (M, 2) (only counted once it is full).
+    """Pairs (a < b) of boxes of different band that meet, into out (M, 2) (only counted once it is full). The
+    cell lists come from _cell_lists with band: a cell's boxes of one band are consecutive, so only pairs across
+    its bands are looked at, and a cell inside one band costs one pass (on the 128k-triangle face, 43 % of the
+    cells and half the pairs within cells: 19.7 -> 13.8 s over its 335 frames).
 
     Each pair is reported in one cell only: the cell holding the low corner of the two boxes' intersection,
     max(c0[a], c0[b]), which both cover when they meet."""
@@ -147,20 +153,24 @@ def _candidates(key, owner, c0, band, lo, hi, out) -> int:
         stop = start + 1
         while stop < len(key) and key[stop] == key[start]:
             stop += 1
-        for i in range(start, stop):
-            a = owner[i]
-            for j in range(i + 1, stop):
-                b = owner[j]
-                if band[a] == band[b]:
-                    continue
-                if (max(lo[a, 0], lo[b, 0]) > min(hi[a, 0], hi[b, 0])
-                        or max(lo[a, 1], lo[b, 1]) > min(hi[a, 1], hi[b, 1])):
-                    continue
-                if _cell_key(max(c0[a, 0], c0[b, 0]), max(c0[a, 1], c0[b, 1]), x0, y0) != key[start]:
-                    continue
-                if m < out.shape[0]:
-                    out[m, 0], out[m, 1] = min(a, b), max(a, b)
-                m += 1
+        g0 = start
+        while g0 < stop:  # one band's boxes g0..g1-1 against the cell's later bands
+            g1 = g0 + 1
+            while g1 < stop and band[owner[g1]] == band[owner[g0]]:
+                g1 += 1
+            for i in range(g0, g1):
+                a = owner[i]
+                for j in range(g1, stop):
+                    b = owner[j]
+                    if (max(lo[a, 0], lo[b, 0]) > min(hi[a, 0], hi[b, 0])
+                            or max(lo[a, 1], lo[b, 1]) > min(hi[a, 1], hi[b, 1])):
+                        continue
+                    if _cell_key(max(c0[a, 0], c0[b, 0]), max(c0[a, 1], c0[b, 1]), x0, y0) != key[start]:
+                        continue
+                    if m < out.shape[0]:
+                        out[m, 0], out[m, 1] = min(a, b), max(a, b)
+                    m += 1
+            g0 = g1
         start = stop
     return m
 
@@ -280,8 +290,8 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = 
         on = np.take(act, idx, axis=1)
         lo, hi = _boxes(pts, on, np.float32(margin / 2))
         cell = max(1.5 * float(np.median((hi - lo).max(axis=1))), 1.0)
-        key, owner, c0 = _cell_lists(lo, hi, cell)
         own_band = band[idx] if band is not None else np.arange(len(idx))  # most neighbours share a band
+        key, owner, c0 = _cell_lists(lo, hi, cell, own_band if band is not None else None)
         out = np.empty((max(4 * len(idx), last_m + last_m // 4), 2), np.int64)  # blocks alike: rarely twice
         m = last_m = _candidates(key, owner, c0, own_band, lo, hi, out)
         if m > len(out):

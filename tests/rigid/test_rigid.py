@@ -191,11 +191,11 @@ def test_pair_set_is_a_set():
     assert not pairs.absent(np.array(sorted(want))).any()
 
 
-@pytest.mark.parametrize("grows", [False, True])
-def test_overlap_pairs_match_every_pair_tested_by_brute_force(monkeypatch, grows):
-    # Random small triangles over a few blocks of frames, some hidden, two bands: the grid candidates, their
-    # per-cell reporting and the dedupe across blocks (a PairSet, starting at 2 slots when it grows) against
-    # testing every pair.
+@pytest.mark.parametrize(("grows", "bands"), [(False, 2), (True, 2), (False, 7)])
+def test_overlap_pairs_match_every_pair_tested_by_brute_force(monkeypatch, grows, bands):
+    # Random small triangles over a few blocks of frames, some hidden, in bands: the grid candidates (a cell's
+    # boxes grouped by band, only pairs across its bands looked at), their per-cell reporting and the dedupe
+    # across blocks (a PairSet, starting at 2 slots when it grows) against testing every pair.
     if grows:
         monkeypatch.setattr(overlap, "PAIRSET_BITS", 1)
     rng = np.random.default_rng(11)
@@ -203,7 +203,7 @@ def test_overlap_pairs_match_every_pair_tested_by_brute_force(monkeypatch, grows
     centre = rng.uniform(0, 60, (1, p, 1, 2)) + np.cumsum(rng.normal(0, 1.0, (t, p, 1, 2)), axis=0)
     xy = centre + rng.uniform(-4, 4, (t, p, 3, 2))
     active = rng.random((t, p)) > 0.3
-    band = rng.integers(0, 2, p)
+    band = rng.integers(0, bands, p)
     got = {tuple(e) for e in overlap.overlap_pairs(xy, active, block=8, margin=0.5, band=band).tolist()}
     want = set()
     lo, hi = xy.min(axis=2), xy.max(axis=2)
