@@ -39,6 +39,7 @@ from converter.sheet import Sheet
 OVERLAP_MARGIN_PX = 0.25  # interiors must overlap by this much along every axis (neighbours only touch)
 SAMPLE_FRAMES = 16  # overlapping pairs are searched at about this many frames
 CHUNK = 4000  # pairs tested together
+SHORT_ROW = 8  # greedy_order releases a popped path's successors one by one up to this many, else with numpy
 
 
 class DrawList(NamedTuple):
@@ -86,10 +87,18 @@ def greedy_order(key: np.ndarray, pairs: np.ndarray, switch: Callable[[dict[int,
             cur = switch(free)
         i = heapq.heappop(free[cur])
         order.append(i)
-        for j in indices[indptr[i]:indptr[i + 1]].tolist():
-            indeg[j] -= 1
-            if indeg[j] == 0:
-                heapq.heappush(free.setdefault(kl[j], []), j)
+        succ_i = indices[indptr[i]:indptr[i + 1]]  # distinct (the pairs are deduplicated), ascending
+        if len(succ_i) > SHORT_ROW:
+            indeg[succ_i] -= 1
+            ready = succ_i[indeg[succ_i] == 0].tolist()
+        else:
+            ready = []
+            for j in succ_i.tolist():
+                indeg[j] -= 1
+                if indeg[j] == 0:
+                    ready.append(j)
+        for j in ready:  # pushed in the same order either way
+            heapq.heappush(free.setdefault(kl[j], []), j)
     return np.array(order, np.int64)
 
 

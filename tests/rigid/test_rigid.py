@@ -10,6 +10,7 @@ import pytest
 from converter import verify
 from converter.encode import freeknots, groups, overlap, robust_affine
 from converter.encode import keys as keyframes
+from converter.encode import order as order_mod
 from converter.encode.budget import ErrorBudget
 from converter.extract import extract, fit_camera
 from converter.writers.svg_transforms import CLOSE, group_open
@@ -70,6 +71,25 @@ def test_reorder_keeps_every_overlapping_pair_and_merges_runs():
         return int((np.diff(b) != 0).sum()) + 1
 
     assert runs(band[order]) < runs(band) / 3
+
+
+def test_reorder_releases_long_and_short_successor_rows_alike(monkeypatch):
+    # Dense pairs (rows of ~20 successors): released with numpy past order.SHORT_ROW, one by one below it; the
+    # same order either way, and every pair kept.
+    rng = np.random.default_rng(5)
+    p = 80
+    band = rng.integers(0, 4, p)
+    pairs = np.unique(np.sort(rng.integers(0, p, (1600, 2)), axis=1), axis=0)
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    assert np.bincount(pairs[:, 0]).max() > 20
+    orders = []
+    for short in (0, 10**9):
+        monkeypatch.setattr(order_mod, "SHORT_ROW", short)
+        orders.append(groups.reorder(band, pairs))
+    assert orders[0].tolist() == orders[1].tolist()
+    pos = np.empty(p, int)
+    pos[orders[0]] = np.arange(p)
+    assert sorted(orders[0].tolist()) == list(range(p)) and (pos[pairs[:, 0]] < pos[pairs[:, 1]]).all()
 
 
 def test_overlap_pairs_finds_touching_and_not_far_triangles():
