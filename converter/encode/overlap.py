@@ -114,9 +114,9 @@ def _boxes(pts, on, grow):
 
 
 def _cell_lists(lo: np.ndarray, hi: np.ndarray, cell: float,
-                band: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Boxes [lo, hi] (N, 2) on a grid of side cell: (cell key, box) for every cell a box covers, sorted by
-    key, then by band (N,) when given, then by box; and each box's lowest cell (N, 2)."""
+                band: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Boxes [lo, hi] (N, 2) of bands (N,) on a grid of side cell: (cell key, box) for every cell a box covers,
+    sorted by key, then by band, then by box; and each box's lowest cell (N, 2)."""
     c0 = np.floor(lo / cell).astype(np.int64)
     span = np.floor(hi / cell).astype(np.int64) - c0 + 1
     n_cells = span[:, 0] * span[:, 1]
@@ -126,8 +126,7 @@ def _cell_lists(lo: np.ndarray, hi: np.ndarray, cell: float,
     cx = np.repeat(c0[:, 0], n_cells) + local % sx
     cy = np.repeat(c0[:, 1], n_cells) + local // sx
     key = _cell_key(cx, cy, c0[:, 0].min(), c0[:, 1].min())
-    # Both sorts are stable and owner rises already, so a cell's boxes (of one band) stay in owner order.
-    order = np.argsort(key, kind="stable") if band is None else lexsort_ints((band[owner], key))
+    order = lexsort_ints((band[owner], key))  # stable, and owner rises already: then by box
     return key[order], owner[order], c0
 
 
@@ -291,7 +290,7 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = 
         lo, hi = _boxes(pts, on, np.float32(margin / 2))
         cell = max(1.5 * float(np.median((hi - lo).max(axis=1))), 1.0)
         own_band = band[idx] if band is not None else np.arange(len(idx))  # most neighbours share a band
-        key, owner, c0 = _cell_lists(lo, hi, cell, own_band if band is not None else None)
+        key, owner, c0 = _cell_lists(lo, hi, cell, own_band)
         out = np.empty((max(4 * len(idx), last_m + last_m // 4), 2), np.int64)  # blocks alike: rarely twice
         m = last_m = _candidates(key, owner, c0, own_band, lo, hi, out)
         if m > len(out):
