@@ -22,6 +22,19 @@ EGL_HELP = (
     "'apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1' and keep PYOPENGL_PLATFORM=egl"
 )
 _PLATFORM_DEVICE_EXT = 0x313F  # EGL_EXT_platform_device
+_used = False  # an EGL display was (or was about to be) initialised in this process: see used()
+
+
+def used() -> bool:
+    """Whether this process has initialised an EGL display (ours or pyrender's): a forked child would inherit a
+    driver's state that does not survive fork (converter.isolated)."""
+    return _used
+
+
+def mark_used() -> None:
+    """Record that an EGL display is about to be initialised in this process."""
+    global _used
+    _used = True
 
 
 def _egl():
@@ -104,6 +117,7 @@ class EglContext:
         self._egl = self._display = self._context = None
         with render_errors(self.close):
             self._egl = egl = _egl()
+            mark_used()
             self._display = _display(egl)
             major, minor = egl.EGLint(), egl.EGLint()
             with _raster_threads(raster_threads):

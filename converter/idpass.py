@@ -39,6 +39,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 import numba
 import numpy as np
 
+from converter import isolated
 from converter.camera import Camera
 from converter.egl import EglContext, render_errors
 from converter.errors import RenderError
@@ -154,7 +155,14 @@ def clip_coords(camera: Camera, frames: np.ndarray) -> np.ndarray:
 
 def ever_seen(frames: np.ndarray, faces: np.ndarray, camera: Camera, visible: np.ndarray,
               progress=None) -> np.ndarray:
-    """Bool (F,): the triangles some frame shows by the module's rule; visible (T, F) is the culling."""
+    """Bool (F,): the triangles some frame shows by the module's rule; visible (T, F) is the culling. Run in a
+    forked child where that is safe (converter.isolated): Mesa's memory leaves with it."""
+    return isolated.run(_ever_seen, frames, faces, camera, visible, progress=progress, what="the occlusion pass")
+
+
+def _ever_seen(frames: np.ndarray, faces: np.ndarray, camera: Camera, visible: np.ndarray,
+               progress=None) -> np.ndarray:
+    """ever_seen in this process."""
     t, f = frames.shape[0], faces.shape[0]
     kept = np.zeros(f, bool)
     faces64 = faces.astype(np.int64)

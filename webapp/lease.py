@@ -8,13 +8,10 @@ a reaper, recovery at start) settles the job once: re-queued while retries remai
 
 from __future__ import annotations
 
-import ctypes
 import fcntl
 import logging
 import os
-import signal
 import socket
-import sys
 import threading
 import time
 import uuid
@@ -24,7 +21,6 @@ from webapp.jobstore import CANCELLING, FAILED, QUEUED, RUNNING, JobStore
 from webapp.storage import Storage
 
 log = logging.getLogger("facesvg.webapp")
-PR_SET_PDEATHSIG = 1  # linux/prctl.h
 LOCK_NAME = "server.lock"
 
 
@@ -64,18 +60,6 @@ class InstanceLock:
 def new_owner(kind: str) -> str:
     """A fresh owner id naming host, process and a random part (unique per worker incarnation)."""
     return f"{kind}:{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
-
-
-def die_with_parent(parent_pid: int | None = None) -> None:
-    """Ask Linux to SIGKILL this process when its parent dies; exit now if the parent is already gone."""
-    if sys.platform.startswith("linux"):
-        try:
-            libc = ctypes.CDLL(None, use_errno=True)
-            libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-        except (OSError, AttributeError):  # no prctl: the heartbeat's parent check still stops us
-            pass
-    if parent_pid is not None and os.getppid() != parent_pid:
-        os._exit(1)
 
 
 class Heartbeat:

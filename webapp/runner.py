@@ -19,12 +19,13 @@ from converter import mpeg4
 from converter.convert import convert
 from converter.errors import FacesvgError
 from converter.extract import extract, fit_camera
+from converter.isolated import die_with_parent
 from converter.options import ConversionOptions
 from converter.outputs import output_kind
 from converter.userfiles import write_atomic
 from converter.verify import verify_animation
 from webapp.jobstore import CANCELLING, DONE, FAILED, RUNNING, Job, JobStore, open_store
-from webapp.lease import Heartbeat, die_with_parent, new_owner
+from webapp.lease import Heartbeat, new_owner
 from webapp.messages import user_words
 from webapp.storage import Storage, result_files
 

@@ -14,8 +14,9 @@ import os
 import threading
 import time
 
+from converter.isolated import die_with_parent
 from webapp.jobstore import CANCELLING, RUNNING, JobStore, open_store
-from webapp.lease import die_with_parent, expired, new_owner, settle
+from webapp.lease import expired, new_owner, settle
 from webapp.runner import execute
 from webapp.storage import Storage
 from webapp.warmup import warm_converter
