@@ -14,7 +14,6 @@
 
 from __future__ import annotations
 
-import resource
 import sys
 from pathlib import Path
 
@@ -24,6 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from bench import usage
 from bench.capture_like import capture_like
 from bench.faces import ict_head
 from bench.legacy_occlusion import legacy_triangle_ids
@@ -50,9 +50,9 @@ llvmpipe's threads, so both columns are inflated; the ratio (5.0x) is the figure
 
 
 def cpu() -> float:
-    """User + sys seconds of this process, all threads."""
-    r = resource.getrusage(resource.RUSAGE_SELF)
-    return r.ru_utime + r.ru_stime
+    """User + sys seconds of this process (all threads) and its waited-for children (bench/usage.py): the pass
+    runs here once the old pass has initialised EGL, in a forked child otherwise (converter.isolated)."""
+    return usage.cpu()
 
 
 def culled(anim: FaceAnimation, cam: Camera) -> np.ndarray:

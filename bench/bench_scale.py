@@ -31,6 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from bench import usage
 from bench.bench_weights import ICT, write_capture
 from bench.capture_like import FRAMES, capture_like
 from converter.animation import FaceAnimation, Part
@@ -152,19 +153,19 @@ def child(frames: int, triangles: int, subdivisions: int, mode: str) -> dict:
     same extraction and naive_svg), report CPU (user+sys) and peak RSS."""
     if mode == "floor":  # the runtime's own share: the bundled sample's first 10 frames, converted
         anim = load_file(ROOT / "samples" / "face.glb").sliced(0, 10)
-        c = time.process_time()
+        c = usage.cpu()
         convert_animation(anim, ConversionOptions())
-        return {"cpu": time.process_time() - c, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+        return {"cpu": usage.cpu() - c, "peak_mb": usage.peak_mb()}
     anim = arkit_face(frames) if triangles == ARKIT[1] else load_face(face_file(frames, triangles, subdivisions))
     before_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     if mode == "naive":
-        c = time.process_time()
+        c = usage.cpu()
         sheet = extract_sheet(anim, ConversionOptions(), Report())
-        w = time.process_time()
+        w = usage.cpu()
         size = naive_svg(sheet, len)
-        cpu = time.process_time() - c
+        cpu = usage.cpu() - c
         return {"triangles": anim.n_faces, "frames": anim.n_frames, "cpu": cpu, "writer_cpu": cpu - (w - c),
-                "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "before_mb": before_mb,
+                "peak_mb": usage.peak_mb(), "before_mb": before_mb,
                 "bytes": size}
     kind = output_kind("svg")
     flat = kind.shading_writers["flat"]
@@ -177,11 +178,11 @@ def child(frames: int, triangles: int, subdivisions: int, mode: str) -> dict:
         return out
 
     kind.shading_writers["flat"] = timed
-    c = time.process_time()
+    c = usage.cpu()
     result = convert_animation(anim, ConversionOptions(raw=mode == "raw"))
-    cpu = time.process_time() - c
+    cpu = usage.cpu() - c
     return {"triangles": anim.n_faces, "frames": anim.n_frames, "cpu": cpu, "writer_cpu": writer_cpu[0],
-            "extract_cpu": cpu - writer_cpu[0], "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+            "extract_cpu": cpu - writer_cpu[0], "peak_mb": usage.peak_mb(),
             "before_mb": before_mb, "bytes": len(result.data), "paths": result.report.counts.get("paths", 0)}
 
 
@@ -192,8 +193,10 @@ def measure(frames: int, triangles: int, subdivisions: int, mode: str) -> dict:
     cmd = [sys.executable, str(Path(__file__).resolve()), "child", str(frames), str(triangles), str(subdivisions),
            mode]
     env = dict(os.environ, PYOPENGL_PLATFORM=os.environ.get("PYOPENGL_PLATFORM", "egl"))
-    out = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT, check=True)
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    out, tree_mb = usage.run_measured(cmd, env=env, cwd=ROOT)
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    r["rss_peak_mb"], r["peak_mb"] = r["peak_mb"], max(r["peak_mb"], tree_mb)
+    return r
 
 
 def _median(runs: list[dict]) -> dict:
@@ -217,7 +220,7 @@ def run() -> str:
         runs = CAPTURE_RUNS if case == CAPTURE else 1
         res[case] = tuple(_median([measure(*case, mode) for _ in range(runs)]) for mode in ("bounded", "naive"))
         print(case, res[case], flush=True)
-    rows = ["| case | triangles x frames | CPU s (convert) | of which writer | writer M tri-frames/s | peak RSS MB | "
+    rows = ["| case | triangles x frames | CPU s (convert) | of which writer | writer M tri-frames/s | peak MB | "
             "B per tri-frame | naive CPU s | naive peak MB | CPU vs naive | output MB (naive) |",
             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for case in cases:
@@ -231,7 +234,7 @@ def run() -> str:
                     f"{b['bytes'] / 1e6:.1f} ({r['bytes'] / 1e6:.1f}) |")
     raw_cases = [c for c in frame_cases if c[0] <= RAW_FRAMES]
     rows += ["", "`--raw`, a block of paths at a time:", "",
-             "| case | CPU s | peak RSS MB | B per tri-frame | output MB |", "|---|---|---|---|---|"]
+             "| case | CPU s | peak MB | B per tri-frame | output MB |", "|---|---|---|---|---|"]
     for case in raw_cases:
         r = measure(*case, "raw")
         tf = r["triangles"] * r["frames"]
@@ -242,17 +245,18 @@ def run() -> str:
     grow = (f"Growth exponents (log-log fit of convert CPU): frames {_exponent(fx, [res[c][0]['cpu'] for c in frame_cases])}"
             f" (8k triangles, {', '.join(map(str, fx))} frames); triangles "
             f"{_exponent(tx, [res[c][0]['cpu'] for c in tri_cases])} ({', '.join(f'{t:,}' for t in tx)} triangles). "
-            f"Peak RSS: frames {_exponent(fx, [res[c][0]['peak_mb'] for c in frame_cases])}, triangles "
+            f"Peak memory: frames {_exponent(fx, [res[c][0]['peak_mb'] for c in frame_cases])}, triangles "
             f"{_exponent(tx, [res[c][0]['peak_mb'] for c in tri_cases])}.")
     skipped = [c for c in FRAME_CASES + TRIANGLE_CASES if c not in cases]
     note = (f"Quick mode (FACESVG_BENCH_QUICK=1): not run: "
             f"{', '.join(f'{c[1] * 4 ** c[2] // 1000}k x {c[0]}' for c in skipped)}. " if skipped else "")
     return "\n".join([
         "Default options (flat, bounded, rigid factoring on, 512 px) against the naive writer (`naive_svg`: the same "
-        "extraction, then every kept triangle's coordinates at every frame with 2 decimals, streamed). CPU is user+sys of the conversion inside a fresh child process (`time.process_time`, all "
-        "threads; the face's generation excluded), the capture-like face the median of its runs (by CPU), the other "
+        "extraction, then every kept triangle's coordinates at every frame with 2 decimals, streamed). CPU is user+sys of the conversion inside a fresh child process (all "
+        "threads, plus the process the occlusion pass forks: `bench/usage.py`; the face's generation excluded), the capture-like face the median of its runs (by CPU), the other "
         "cases one run each (the machine, 2 cores, was shared with other engineers' jobs: single runs scatter by "
-        "10-20 %). Peak RSS is the child's `ru_maxrss`. The child loads its face from an .npz that a process of its "
+        "10-20 %). Peak MB is the larger of the child's `ru_maxrss`, its forked pass's, and the "
+        "sampled peak of the sum of their PSS (shared pages counted once, every 20 ms: `usage.TreePss`). The child loads its face from an .npz that a process of its "
         "own generated (until 2026-12-03 the child generated it, and its peak held the generator's heap too), so the "
         f"peak is the interpreter and libraries, the face's frames (~{res[cases[0]][0]['before_mb']:.0f} MB before "
         "converting at 100 frames) and the conversion. The runtime's own share: converting the bundled sample's first "

@@ -19,6 +19,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from bench import usage
 from converter import blendshapes
 from converter.convert import convert
 from converter.formats.morphs import load_morph_face
@@ -71,11 +72,11 @@ def child_convert(n_frames: int, options: dict) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "long.csv"
         write_capture(path, n_frames)
-        c0, t0 = time.process_time(), time.perf_counter()
+        c0, t0 = usage.cpu(), time.perf_counter()
         result = convert(ICT, ConversionOptions.from_mapping({**options, "weights": str(path)}))
-        c1, t1 = time.process_time(), time.perf_counter()
+        c1, t1 = usage.cpu(), time.perf_counter()
     r = result.report
-    print(json.dumps({"cpu": c1 - c0, "wall": t1 - t0, "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    print(json.dumps({"cpu": c1 - c0, "wall": t1 - t0, "rss_mb": usage.peak_mb(),
                       "bytes": len(result.data), "triangles": r.counts.get("paths", 0),
                       "timings": {k: round(v, 1) for k, v in r.timings.items()}}))
 
