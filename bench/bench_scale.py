@@ -260,8 +260,9 @@ def run() -> str:
         "own generated (until 2026-12-03 the child generated it, and its peak held the generator's heap too), so the "
         f"peak is the interpreter and libraries, the face's frames (~{res[cases[0]][0]['before_mb']:.0f} MB before "
         "converting at 100 frames) and the conversion. The runtime's own share: converting the bundled sample's first "
-        f"10 frames peaks at {floor['peak_mb']:,.0f} MB (median of 3; Mesa's EGL context for the occlusion pass "
-        "~135 MB, numba's compiled code ~60 MB, measured 2026-12-03). Writer M tri-frames/s = triangles x frames / "
+        f"10 frames peaks at {floor['peak_mb']:,.0f} MB (median of 3; numba's compiled code ~60 MB, measured 2026-12-03; "
+        "Mesa's EGL context, 70-135 MB, is the occlusion pass's alone since 2026-12-06: the pass runs in a child "
+        "forked for it, `converter/isolated.py`, and the context leaves with the child). Writer M tri-frames/s = triangles x frames / "
         "writer CPU.",
         "",
         *rows,
