@@ -1,0 +1,83 @@
+"""parallel.threaded: every slice once, helpers kept across calls, none left running when a slice raises, and a
+forked child gets helpers of its own (a pool's threads do not survive fork)."""
+
+import os
+import select
+import signal
+import threading
+import time
+
+import numba
+import numpy as np
+import pytest
+
+from converter.encode import parallel
+
+
+@numba.njit(nogil=True)
+def _square(x, out, first, stop):
+    for i in range(first, stop):
+        out[i] = x[i] * x[i]
+
+
+def _fill(out, tid, first, stop):
+    out[first:stop] += 1
+    tid[first:stop] = threading.get_ident()
+
+
+@pytest.fixture
+def two(monkeypatch):
+    monkeypatch.setattr(parallel, "THREADS", 2)
+
+
+def test_every_item_once_on_this_thread_and_one_helper_kept_across_calls(two):
+    out, tid = np.zeros(101, np.int64), np.zeros(101, np.int64)
+    parallel.threaded(_fill, 101, out, tid)
+    assert (out == 1).all()
+    assert set(tid[:50].tolist()) == {threading.get_ident()} and threading.get_ident() not in tid[51:]
+    helper = int(tid[-1])
+    parallel.threaded(_fill, 101, out, tid)
+    assert (out == 2).all() and int(tid[-1]) == helper  # the same helper: no thread started per call
+    x = np.arange(1000, dtype=np.float64)
+    sq = np.empty_like(x)
+    parallel.threaded(_square, len(x), x, sq)
+    assert np.array_equal(sq, x * x)
+
+
+def test_a_slice_that_raises_returns_only_after_the_others_finished(two):
+    done = []
+
+    def kernel(first, stop):
+        if first == 0:
+            raise ValueError("slice 0")
+        time.sleep(0.2)
+        done.append(stop)
+
+    with pytest.raises(ValueError, match="slice 0"):
+        parallel.threaded(kernel, 10)
+    assert done == [10]
+
+
+def test_a_forked_child_makes_helpers_of_its_own(two):
+    out, tid = np.zeros(10, np.int64), np.zeros(10, np.int64)
+    parallel.threaded(_fill, 10, out, tid)  # the parent's helper exists
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        code = 1
+        try:
+            child_out = np.zeros(10, np.int64)
+            parallel.threaded(_fill, 10, child_out, np.zeros(10, np.int64))
+            code = 0 if (child_out == 1).all() else 2
+        finally:
+            os.write(w, bytes([code]))
+            os._exit(0)
+    os.close(w)
+    try:
+        ready, _, _ = select.select([r], [], [], 30)
+        if not ready:  # waiting on the parent's helper, which does not exist in the child
+            os.kill(pid, signal.SIGKILL)
+        assert ready and os.read(r, 1) == b"\x00"
+    finally:
+        os.close(r)
+        os.waitpid(pid, 0)
