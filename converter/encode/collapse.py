@@ -23,7 +23,7 @@ import numpy as np
 from converter.arrays import lexsort_ints
 from converter.encode.keys import Keys
 
-FOLD_CELLS = 1 << 22  # path-frames folded at a time
+FOLD_CELLS = 1 << 19  # path-frames folded at a time
 
 
 class Timeline(NamedTuple):

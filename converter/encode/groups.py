@@ -472,17 +472,14 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
         local = lay.band_local(cand)
         kl = keys_of(local, r_local, cand)
         kl_n[cand] = kl.mask.sum(axis=0)
-        won = np.zeros(len(cand), bool)
         at = 0
-        for a, b in block:
+        for a, b in block:  # a run is paths a..b of out_track and at..at + b - a of local: slices, no copies
             if pays(a, ((kh_n[a:b] - kl_n[a:b]) * costs.key).sum()):
                 wrapped_runs.append((a, b))
-                won[at:at + b - a] = True
+                wrapped[a:b] = True
+                out_track[:, a:b] = local[:, at:at + b - a]
+                keys.mask[:, a:b], keys.values[:, a:b] = kl.mask[:, at:at + b - a], kl.values[:, at:at + b - a]
             at += b - a
-        w = cand[won]
-        wrapped[w] = True
-        out_track[:, w] = local[:, won]
-        keys.mask[:, w], keys.values[:, w] = kl.mask[:, won], kl.values[:, won]
         del local, kl
     head_bytes = costs.transform(lay.head)
     n_keys = np.where(wrapped, kl_n, kh_n)
