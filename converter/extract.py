@@ -6,7 +6,7 @@ import numba
 import numpy as np
 
 from converter import framing, idpass, render
-from converter.animation import FaceAnimation, face_normals, vertex_normals
+from converter.animation import FaceAnimation, vertex_normals
 from converter.camera import Camera
 from converter.errors import InputError
 from converter.lighting import DEFAULT_LIGHTING, Lighting, lambert
@@ -60,6 +60,41 @@ def _cull(xy, ndc_z, w, faces, width, height, out):
             out[k, f] = area2 < 0 and not behind and not outside
 
 
+def unit_face_normals(frames: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """animation.face_normals(frames, faces), the same bits, compiled: one pass with no (T, F, 3) temporaries
+    (numpy's gathers, cross product and norm were 0.68 s of the capture-like face's 1.6 s extraction, 14.6 s on a
+    4,000-frame capture of the ICT head)."""
+    out = np.empty((frames.shape[0], faces.shape[0], 3), np.float32)
+    frames = np.ascontiguousarray(frames)
+    _unit_face_normals(frames, np.ascontiguousarray(faces, np.int64), frames.dtype.type(1), out)
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _unit_face_normals(frames, faces, one, out):
+    """unit_face_normals into out (T, F, 3), in frames' precision (one: 1 of it), operation for operation as
+    numpy's: the cross product's products then differences (numba contracts nothing into FMAs without fastmath),
+    the sum of squares left to right, a zero or NaN length divided by as 1."""
+    for k in range(frames.shape[0]):
+        for f in range(faces.shape[0]):
+            i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+            ax = frames[k, i1, 0] - frames[k, i0, 0]
+            ay = frames[k, i1, 1] - frames[k, i0, 1]
+            az = frames[k, i1, 2] - frames[k, i0, 2]
+            bx = frames[k, i2, 0] - frames[k, i0, 0]
+            by = frames[k, i2, 1] - frames[k, i0, 1]
+            bz = frames[k, i2, 2] - frames[k, i0, 2]
+            nx = ay * bz - az * by
+            ny = az * bx - ax * bz
+            nz = ax * by - ay * bx
+            ln = np.sqrt(nx * nx + ny * ny + nz * nz)
+            if not ln > 0:
+                ln = one
+            out[k, f, 0] = nx / ln
+            out[k, f, 1] = ny / ln
+            out[k, f, 2] = nz / ln
+
+
 def painter_order(depth: np.ndarray, faces: np.ndarray, candidates: np.ndarray, frame: int) -> np.ndarray:
     """Candidate triangle ids sorted back to front by centroid depth at one frame (stable, deterministic)."""
     centroid = depth[frame][faces[candidates]].mean(axis=1)
@@ -111,7 +146,7 @@ def extract(
     vertex_rgb = np.empty((t, v, 3), np.float32) if vertex_colors else None
     tri_rgb, vert_base = anim.triangle_colors()[None], anim.face_base_colors()[None]
     for blk in _blocks(t):
-        face_rgb[blk] = lambert(face_normals(frames[blk], faces), tri_rgb, camera.view, lighting)
+        face_rgb[blk] = lambert(unit_face_normals(frames[blk], faces), tri_rgb, camera.view, lighting)
         if vertex_rgb is not None:
             vertex_rgb[blk] = lambert(vertex_normals(frames[blk], faces), vert_base, camera.view, lighting)
     _, neutral_z, _ = camera.project(frames[neutral:neutral + 1])  # float64: the order must not see rounding
