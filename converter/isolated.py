@@ -9,7 +9,8 @@ its parent (on Linux, by the parent-death signal), so a worker killed mid-job le
 A fork is used only where it is safe for this work: on a platform with fork, and only while no EGL display has
 been initialised in this process (a driver's state does not survive fork; after a prerender the pass runs
 here, as it did before). The child only computes and writes to its pipe: it takes no lock another thread of
-the parent could hold (the job store's, logging's), and leaves with os._exit.
+the parent could hold at the fork (the job store's it never touches; numba's is held across the fork by the
+forking thread, the others are reset by fork handlers), and leaves with os._exit.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import signal
 import sys
 import warnings
 from collections.abc import Callable
+from contextlib import AbstractContextManager, nullcontext
 from typing import Any
 
 from converter import egl
@@ -46,7 +48,7 @@ def run(fn: Callable[..., Any], *args: Any, progress: Progress | None = None, wh
     # to have children, and the child must run no exit handlers of the parent's (os._exit).
     receive, send = multiprocessing.Pipe(duplex=False)
     parent = os.getpid()
-    with warnings.catch_warnings():  # Python 3.12+ warns on fork with threads: the child takes none of their locks
+    with warnings.catch_warnings(), _fork_locks():  # Python 3.12+ warns on fork with threads: see _fork_locks
         warnings.simplefilter("ignore", DeprecationWarning)
         pid = os.fork()
     if pid == 0:  # the child: whatever happens, it leaves here
@@ -83,6 +85,18 @@ def run(fn: Callable[..., Any], *args: Any, progress: Progress | None = None, wh
             except ProcessLookupError:
                 pass
             os.waitpid(pid, 0)
+
+
+def _fork_locks() -> AbstractContextManager:
+    """The locks the child may take that no fork handler resets, held by this thread across the fork so that no
+    other thread holds them then: numba's compiler lock (a child loading a compiled function from the cache while
+    a sibling job's thread was compiling would wait for ever). Python resets its import lock and logging's;
+    glibc and OpenBLAS reset theirs."""
+    if "numba" not in sys.modules:
+        return nullcontext()
+    from numba.core.compiler_lock import global_compiler_lock  # noqa: PLC0415 - only where numba is loaded
+
+    return global_compiler_lock
 
 
 def _death(status: int) -> str:

@@ -202,3 +202,32 @@ def test_the_forked_occlusion_pass_keeps_what_the_pass_here_keeps():
     assert r["unused"] and not r["after"]
     assert r["forked"] == r["here"] and 0 < sum(r["here"]) < len(r["here"])
     assert len(r["progress"]) == r["frames"] and r["progress"][-1] == 1.0
+
+
+def test_a_fork_while_another_thread_holds_numbas_compiler_lock_does_not_leave_the_child_waiting():
+    # A sibling job's thread compiling (numba's global lock held) when the pass forks: the child, compiling or
+    # loading its own kernels, would wait for a lock no thread of its own will ever release.
+    script = textwrap.dedent(f"""
+        import sys, threading, time
+        sys.path.insert(0, {str(ROOT)!r})
+        import numba
+        from numba.core.compiler_lock import global_compiler_lock
+        from converter import isolated
+
+        held = threading.Event()
+
+        def compiling():
+            with global_compiler_lock:
+                held.set()
+                time.sleep(1.0)
+
+        def work(progress=None):
+            return numba.njit(lambda x: x + 1)(41)
+
+        threading.Thread(target=compiling).start()
+        held.wait()
+        print(isolated.run(work))
+    """)
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["42"]
