@@ -60,7 +60,7 @@ def run(fn: Callable[..., Any], *args: Any, progress: Progress | None = None, wh
         finally:
             os._exit(code)
     send.close()
-    status = None
+    reaped = False
     try:
         while True:
             try:
@@ -71,20 +71,28 @@ def run(fn: Callable[..., Any], *args: Any, progress: Progress | None = None, wh
                 if progress:
                     progress(value)
                 continue
-            status = os.waitpid(pid, 0)[1]
+            reaped, _ = True, _reap(pid)
             if kind == "error":
                 raise value
             return value
-        status = os.waitpid(pid, 0)[1]
+        reaped, status = True, _reap(pid)
         raise RenderError(f"{what} stopped: {_death(status)}; the machine may be short of memory.")
     finally:
         receive.close()
-        if status is None:
+        if not reaped:
             try:
                 os.kill(pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
-            os.waitpid(pid, 0)
+            _reap(pid)
+
+
+def _reap(pid: int) -> int | None:
+    """Wait for child pid: its wait status, None if something else reaped it (SIGCHLD ignored, say)."""
+    try:
+        return os.waitpid(pid, 0)[1]
+    except ChildProcessError:
+        return None
 
 
 def _fork_locks() -> AbstractContextManager:
@@ -99,8 +107,10 @@ def _fork_locks() -> AbstractContextManager:
     return global_compiler_lock
 
 
-def _death(status: int) -> str:
-    """How a child that sent no result ended, from its wait status."""
+def _death(status: int | None) -> str:
+    """How a child that sent no result ended, from its wait status (None: unknown)."""
+    if status is None:
+        return "its process ended without a result"
     code = os.waitstatus_to_exitcode(status)
     if code < 0:
         try:

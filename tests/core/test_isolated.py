@@ -231,3 +231,14 @@ def test_a_fork_while_another_thread_holds_numbas_compiler_lock_does_not_leave_t
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["42"]
+
+
+def test_a_child_reaped_elsewhere_still_gives_its_result(forking):
+    # SIGCHLD ignored (as some process supervisors leave it): the kernel reaps the child, waitpid finds none.
+    old = signal.signal(signal.SIGCHLD, signal.SIG_IGN)
+    try:
+        assert np.array_equal(isolated.run(_array, 3, progress=lambda f: None), [0, 2, 4])
+        with pytest.raises(RenderError, match="ended without a result"):
+            isolated.run(_kill_self, os.devnull)
+    finally:
+        signal.signal(signal.SIGCHLD, old)
