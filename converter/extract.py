@@ -70,23 +70,27 @@ def unit_face_normals(frames: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return out
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _cross(frames, faces, k, f):
+    """Triangle f's (b - a) x (c - a) at frame k, in frames' precision, as numpy's cross: products, then
+    differences (numba contracts nothing into FMAs without fastmath)."""
+    i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+    ax = frames[k, i1, 0] - frames[k, i0, 0]
+    ay = frames[k, i1, 1] - frames[k, i0, 1]
+    az = frames[k, i1, 2] - frames[k, i0, 2]
+    bx = frames[k, i2, 0] - frames[k, i0, 0]
+    by = frames[k, i2, 1] - frames[k, i0, 1]
+    bz = frames[k, i2, 2] - frames[k, i0, 2]
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
 @numba.njit(cache=True, nogil=True)
 def _unit_face_normals(frames, faces, one, out):
     """unit_face_normals into out (T, F, 3), in frames' precision (one: 1 of it), operation for operation as
-    numpy's: the cross product's products then differences (numba contracts nothing into FMAs without fastmath),
-    the sum of squares left to right, a zero or NaN length divided by as 1."""
+    numpy's: _cross, the sum of squares left to right, a zero or NaN length divided by as 1."""
     for k in range(frames.shape[0]):
         for f in range(faces.shape[0]):
-            i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
-            ax = frames[k, i1, 0] - frames[k, i0, 0]
-            ay = frames[k, i1, 1] - frames[k, i0, 1]
-            az = frames[k, i1, 2] - frames[k, i0, 2]
-            bx = frames[k, i2, 0] - frames[k, i0, 0]
-            by = frames[k, i2, 1] - frames[k, i0, 1]
-            bz = frames[k, i2, 2] - frames[k, i0, 2]
-            nx = ay * bz - az * by
-            ny = az * bx - ax * bz
-            nz = ax * by - ay * bx
+            nx, ny, nz = _cross(frames, faces, k, f)
             ln = np.sqrt(nx * nx + ny * ny + nz * nz)
             if not ln > 0:
                 ln = one
@@ -106,8 +110,8 @@ def unit_vertex_normals(frames: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 @numba.njit(cache=True, nogil=True)
 def _unit_vertex_normals(frames, faces, out):
-    """unit_vertex_normals into out (T, V, 3), as numpy sums: per frame, the area-weighted face normals (float32
-    cross products) added in float64 corner by corner (all faces' first corners in face order, then the second,
+    """unit_vertex_normals into out (T, V, 3), as numpy sums: per frame, the area-weighted face normals (_cross,
+    rounded to float32) added in float64 corner by corner (all faces' first corners in face order, then the second,
     then the third, each corner's sums added to the total), then divided by the length (1 where not > 0)."""
     t, v, f = frames.shape[0], frames.shape[1], faces.shape[0]
     fn = np.empty((f, 3), np.float32)
@@ -115,16 +119,7 @@ def _unit_vertex_normals(frames, faces, out):
     corner = np.empty((v, 3))
     for k in range(t):
         for i in range(f):
-            i0, i1, i2 = faces[i, 0], faces[i, 1], faces[i, 2]
-            ax = frames[k, i1, 0] - frames[k, i0, 0]
-            ay = frames[k, i1, 1] - frames[k, i0, 1]
-            az = frames[k, i1, 2] - frames[k, i0, 2]
-            bx = frames[k, i2, 0] - frames[k, i0, 0]
-            by = frames[k, i2, 1] - frames[k, i0, 1]
-            bz = frames[k, i2, 2] - frames[k, i0, 2]
-            fn[i, 0] = ay * bz - az * by
-            fn[i, 1] = az * bx - ax * bz
-            fn[i, 2] = ax * by - ay * bx
+            fn[i, 0], fn[i, 1], fn[i, 2] = _cross(frames, faces, k, i)
         total[:] = 0.0
         for c in range(3):
             corner[:] = 0.0
