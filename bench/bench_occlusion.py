@@ -2,7 +2,7 @@
 
     python bench/run.py bench_occlusion
 
-- Cost: process CPU seconds (user + sys of every thread, resource.getrusage) of the pass alone on the
+- Cost: process CPU seconds (user + sys of every thread and of waited-for children, bench/usage.py) of the pass alone on the
   capture-like face (bench/capture_like.py, 512 px), median of 3, old = bench/legacy_occlusion.py (the
   multisampled pyrender pass), new = converter.idpass.
 - Kept sets on the capture-like face and the sample, against a 5x finer id render: "visible" = owns a sample

@@ -4,6 +4,7 @@ in a child, so this process's own clock and ru_maxrss would leave the child's sh
     c = usage.cpu(); work(); seconds = usage.cpu() - c      # user+sys of this process and its waited-for children
     usage.peak_mb()                                          # the larger of this process's and any child's peak RSS
     with usage.TreePss(pid) as tree: ...; tree.peak_mb      # sampled peak of the sum of a process tree's PSS
+    out, mb = usage.run_measured(cmd)                       # subprocess.run, and that peak of its tree
 
 A forked child shares its parent's pages until either writes them, so the two peaks RSS neither add up (the shared
 pages would count twice) nor does the larger bound the machine's use (the child's own pages come on top of the
