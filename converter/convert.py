@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from converter import cloning, formats, framing, mpeg4, simplify, smoothing
+from converter import cloning, formats, framing, heap, mpeg4, simplify, smoothing
 from converter import extract as extraction
 from converter.animation import FaceAnimation
 from converter.blendshapes import drive_file
@@ -90,6 +90,7 @@ def extract_sheet(anim: FaceAnimation, options: ConversionOptions, report: Repor
         raise InputError("no triangle is ever visible from this camera (all face away or lie outside the view); "
                          "check --yaw/--pitch or the mesh's winding.")
     sheet.info["source_frames"] = [options.start, options.start + anim.n_frames]
+    heap.give_back()  # extraction's temporaries, before the writer's
     report.timings["extract"] = time.perf_counter() - t
     report.counts.update({k: v for k, v in sheet.info.items() if isinstance(v, int)})
     return sheet

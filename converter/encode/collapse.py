@@ -16,6 +16,7 @@ visible key between two collapses, which must be placed exactly enough for both 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -73,20 +74,36 @@ def _point(v: np.ndarray) -> np.ndarray:
 def fold(keys: Keys, active: np.ndarray) -> Timeline:
     """The keys with every inactive frame of each path hidden by collapsed keys (module docstring), a block of
     FOLD_CELLS path-frames at a time (paths are independent): its temporaries stay small on a long capture."""
+    return fold_blocks(active, lambda a, b: Keys(keys.mask[:, a:b], keys.values[:, a:b], keys.first_active[a:b]))
+
+
+def fold_blocks(active: np.ndarray, keys_of: Callable[[int, int], Keys], size: int | None = None) -> Timeline:
+    """fold of the keys that keys_of(a, b) gives for paths a..b-1 (active (T, P)), asked for a block of size
+    paths at a time (at most FOLD_CELLS path-frames): the keys of every path never exist at once."""
     t, p = active.shape
-    block = max(1, FOLD_CELLS // max(t, 1))
+    block = max(1, min(FOLD_CELLS // max(t, 1), size or p))
     if p <= block:
-        return _fold(keys, active)
+        return _fold(keys_of(0, p), active)
     fields: list[list[np.ndarray]] = [[] for _ in Timeline._fields]
     for a in range(0, p, block):
-        sl = slice(a, a + block)
-        part = _fold(Keys(keys.mask[:, sl], keys.values[:, sl], keys.first_active[sl]), active[:, sl])
+        part = _fold(keys_of(a, min(a + block, p)), active[:, a:a + block])
         for out, x in zip(fields, part._replace(path=part.path + a)):
             out.append(x)
     joined = []
     while fields:  # one field at a time, its blocks let go as it is joined
         joined.append(np.concatenate(fields.pop(0)))
     return Timeline(*joined)
+
+
+def take_paths(tl: Timeline, order: np.ndarray) -> Timeline:
+    """The timeline of paths order (indices into tl's paths), renumbered 0..len(order)-1."""
+    n = int(tl.path[-1]) + 1 if len(tl.path) else 0
+    bounds = np.searchsorted(tl.path, np.arange(max(n, int(order.max(initial=-1)) + 1) + 1))
+    counts = np.diff(bounds)[order]
+    first = np.repeat(bounds[order] - np.cumsum(counts) + counts, counts)
+    idx = first + np.arange(int(counts.sum()))
+    return Timeline(np.repeat(np.arange(len(order)), counts), tl.half[idx], tl.values[idx], tl.collapsed[idx],
+                    tl.snap[idx])
 
 
 def _fold(keys: Keys, active: np.ndarray) -> Timeline:

@@ -51,12 +51,13 @@ from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import LinearOperator, eigsh
 
 from converter.arrays import unique_ints
-from converter.encode import freeknots
+from converter.encode import collapse, freeknots
 from converter.encode import keys as keyframes
 from converter.encode.budget import ErrorBudget
 from converter.encode.order import greedy_order
 from converter.encode.overlap import overlap_pairs
 from converter.encode.robust_affine import fit_affine
+from converter.encode.tracks import Tracks, blocks
 
 HEAD_CLUSTERS = 24  # motion clusters of the largest band (the head)
 CLUSTER_MIN_TRIANGLES = 50  # fewer clusters on small heads: at least this many triangles each
@@ -110,7 +111,7 @@ class Layout(NamedTuple):
     motions: tuple[BandMotion, ...]  # per band
     gain: np.ndarray  # float64 (P,) error gain of each path's band, head transform included
     head: BandMotion  # the head's transform: the outermost group, around every path
-    head_local: np.ndarray  # float32 (T, P, 6) path vertices in the head's local px
+    head_local: Tracks  # float32 path vertices in the head's local px
 
     def band_local(self, sel: np.ndarray) -> np.ndarray:
         """Paths sel's vertices (T, len(sel), 6) in their band's local px (relative to its centroid), worked out
@@ -120,23 +121,46 @@ class Layout(NamedTuple):
         band = self.band[sel]
         for b in np.unique(band).tolist():
             at = np.flatnonzero(band == b)
-            pts = np.take(self.head_local, sel[at], axis=1).reshape(t, len(at), 3, 2)
+            pts = self.head_local.take(sel[at]).reshape(t, len(at), 3, 2)
             out[:, at] = local_tracks(pts, self.motions[b].matrices).reshape(t, len(at), 6)
         return out
+
+    def tracks(self, wrapped_runs: list[tuple[int, int]]) -> Tracks:
+        """The paths' tracks as encoded: band-local (float32) in the runs wrapped in their band's group, head-local
+        elsewhere; one row per vertex and frame of reference, only those some path uses."""
+        p = len(self.order)
+        frame = np.full(p, -1)  # -1: the head's frame, else the band
+        for a, b in wrapped_runs:
+            frame[a:b] = self.band[a]
+        head = self.head_local
+        uses = [(f, np.flatnonzero(frame == f)) for f in np.unique(frame).tolist()]
+        uses = [(f, sel, *np.unique(head.corners[sel], return_inverse=True)) for f, sel in uses]
+        out = np.empty((head.verts.shape[0], sum(len(v) for _, _, v, _ in uses), 2), np.float32)
+        corners = np.empty((p, 3), np.int64)
+        at = 0
+        for f, sel, verts, inv in uses:
+            pts = np.take(head.verts, verts, axis=1)
+            if f >= 0:
+                pts = local_tracks(pts[:, :, None, :], self.motions[f].matrices)[:, :, 0]
+            out[:, at:at + len(verts)] = pts
+            corners[sel] = at + inv.reshape(len(sel), 3)
+            at += len(verts)
+        return Tracks(out, corners)
 
 
 class Plan(NamedTuple):
     """What the bounded encoder needs to write paths under rigid groups (see ``plan``)."""
 
     order: np.ndarray  # int (P,) new document order of the input paths
-    track: np.ndarray  # float32 (T, P, 6) px to encode per path: local (in a group) or global (plain)
+    track: Tracks  # float32 px to encode per path: local (in a group) or global (plain)
     radius: np.ndarray  # float64 (P,) Euclidean px the keyframing of each path may use
     groups: np.ndarray  # int (G, 2) first and one-past-last path (new order) of each run wrapped in its band's group
     band: np.ndarray  # int (P,) band of each path in the new order, -1 when plain (no group)
     gain: np.ndarray  # float64 (P,) local -> global error gain of each path (1 when plain)
     motions: tuple[BandMotion, ...]  # per band: the played transform
     stats: dict[str, float]
-    keys: keyframes.Keys | None  # the keyframes of track within radius (freeknots.point_keys); None without groups
+    timeline: collapse.Timeline | None  # track's keyframes within radius (freeknots.point_keys), hidden frames
+    # folded in (collapse.fold); None without groups
     head: BandMotion | None  # the outermost group's transform, around every path (None: no groups at all)
 
 
@@ -208,11 +232,24 @@ def motion_clusters(band: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutral
     ref = xy[neutral, verts]
     center = ref.mean(axis=0)
     fit = fit_affine(ref - center, xy, verts)
-    res = np.take(xy, verts, axis=1) - (apply_linear(fit[:, :, :2], ref - center) + fit[:, None, :, 2])
-    if np.percentile(np.linalg.norm(res - res.mean(axis=0), axis=-1), 95) <= MERGE_PX:
+    fitted = apply_linear(fit[:, :, :2], ref - center)
+    fitted += fit[:, None, :, 2]
+    res = np.take(xy, verts, axis=1)
+    res -= fitted
+    del fitted
+    mean = res.mean(axis=0)
+    spread, dy = res[..., 0] - mean[:, 0], res[..., 1] - mean[:, 1]  # |res - mean| as np.linalg.norm works it,
+    np.square(spread, out=spread)  # a coordinate at a time: no temporaries of res's size
+    np.square(dy, out=dy)
+    spread += dy
+    del dy
+    np.sqrt(spread, out=spread)
+    if np.percentile(spread, 95) <= MERGE_PX:
         return out  # the head moves rigidly: one band explains it
+    del spread
     feat = res.transpose(1, 0, 2).reshape(len(verts), -1)
-    feat = feat - feat.mean(axis=0)
+    del res
+    feat -= feat.mean(axis=0)
     feat = principal_components(feat, CLUSTER_COMPONENTS)
     place = (ref - center) / max(float((ref - center).std()), 1e-9) * float(feat.std()) * CLUSTER_PLACE_WEIGHT
     tri_feat = np.c_[feat, place][pos.reshape(-1, 3)].mean(axis=1)
@@ -378,26 +415,26 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
     ids, sizes = np.unique(merged, return_counts=True)
     head = _motion(xy64, unique_ints(faces[merged == ids[np.argmax(sizes)]]), neutral, HEAD_SHARE * tolerance,
                    scale, kt_decimals)
-    in_head = local_tracks(xy64[:, :, None, :], head.matrices)[:, :, 0]  # head frame px, about its centroid
+    xy64 -= head.matrices[:, None, :, 2]  # local_tracks, worked in place: xy64 is not needed after this
+    in_head = apply_linear(np.linalg.inv(head.matrices[:, :, :2]), xy64)  # head frame px, about its centroid
     del xy64  # the rest works in the head's frame (and the overlap test on the float32 xy)
     band_of_tri = motion_clusters(merged, faces, in_head, neutral, head_clusters)
     band_ids, band = np.unique(band_of_tri[tris], return_inverse=True)
     motions = _motions(in_head, [unique_ints(faces[band_of_tri == b]) for b in band_ids.tolist()], neutral,
                        BAND_SHARE * tolerance, scale, kt_decimals)
+    # Stored as float32: ~1e-5 px at these magnitudes (budget.float_err), half the plan's largest array.
+    in_head = in_head.astype(np.float32)
     order = np.arange(len(tris))
     if merge_runs and len(tris) > 1:
         order = reorder(band, overlap_pairs(xy, active, band=band, corners=faces[tris]))
     band = band[order]
-    # Stored as float32: ~1e-5 px at these magnitudes (budget.float_err), half the plan's largest array.
-    in_head = in_head.astype(np.float32)
-    path_head = np.take(in_head, faces[tris[order]], axis=1)  # (T, P, 3, 2) head frame
     gains = np.zeros(len(band_ids))
     for b, m in enumerate(motions):
         lin = np.einsum("tij,tjk->tik", head.matrices[:, :, :2], m.matrices[:, :, :2])
         gains[b] = float(np.linalg.svd(lin, compute_uv=False).max()) if t else 1.0
     change = np.flatnonzero(np.diff(band)) + 1
     runs = np.concatenate([[0], change, [len(tris)]]).astype(np.int64)
-    return Layout(order, band, runs, tuple(motions), gains[band], head, path_head.reshape(t, len(tris), 6))
+    return Layout(order, band, runs, tuple(motions), gains[band], head, Tracks(in_head, faces[tris[order]]))
 
 
 def _motion(xy: np.ndarray, verts: np.ndarray, neutral: int, slack: float, scale: int,
@@ -436,7 +473,9 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     bytes each) outweigh its group (costs.transform of its band plus costs.close); the other paths sit in the
     head's frame. When even that costs more than the plain encoding (global keys), nothing is grouped.
     Band-local tracks and keys are worked out a block of runs at a time and kept only where they win, so the
-    plan holds one track and one set of keys per path."""
+    plan holds one track and one set of keys per path: the tracks once per vertex (encode.tracks), the square
+    keys packed (keys.Packed) until the other shapes refine them and collapse folds them, a block of paths at a
+    time, into the timeline the writer keys from."""
     t, p = active.shape
     lay = layout(xy, faces, part_ids, neutral, tris, active, budget, head_clusters=head_clusters,
                  merge_runs=merge_runs)
@@ -446,16 +485,15 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     r_head = float(budget.local_keys(np.array([lay.head.gain]))[0])
     ok = r_local > 0.05 * global_radius  # a band that magnifies errors too much is not worth it
 
-    def keys_of(x, r, cols=None):
+    def keys_of(x, r, cols):
         # Squares only: which paths to wrap is decided on these; the other shapes refine the chosen tracks below.
-        on, radii = act, np.broadcast_to(np.maximum(r, 1e-6), (p,))
-        if cols is not None:
-            on, radii = np.take(act, cols, axis=1), radii[cols]
-        return freeknots.point_keys(x, on, radii, freeknots.SHAPES_DEG[:1])
+        radii = np.broadcast_to(np.maximum(r, 1e-6), (p,))[cols]
+        return freeknots.point_keys(x, np.take(act, cols, axis=1), radii, freeknots.SHAPES_DEG[:1])
 
-    out_track = lay.head_local  # head-local tracks, replaced in place by band-local ones where a run is wrapped
-    keys = keys_of(out_track, r_head)
-    kh_n = keys.mask.sum(axis=0)
+    size = freeknots.block_tracks(t)
+    head_keys = keyframes.join([keyframes.pack(keys_of(lay.head_local.take(sl), r_head, np.arange(p)[sl]))
+                                for sl in blocks(p, size)])  # head-local, a block of paths at a time
+    kh_n = np.diff(head_keys.start)
     group_bytes = [costs.transform(m) for m in lay.motions]
     runs = list(zip(lay.runs[:-1].tolist(), lay.runs[1:].tolist()))
 
@@ -465,22 +503,21 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     # A run saves at most its head-local keys: band-local keys are worked out only where that could pay.
     maybe = [(a, b) for a, b in runs if pays(a, kh_n[a:b].sum() * costs.key)]
     kl_n = kh_n.copy()
-    wrapped_runs = []
+    wrapped_runs: list[tuple[int, int]] = []
+    local_keys: dict[int, keyframes.Packed] = {}  # first path of a wrapped run -> its band-local keys
     wrapped = np.zeros(p, bool)
-    for block in _run_blocks(maybe, freeknots.block_tracks(t)):
+    for block in _run_blocks(maybe, size):
         cand = np.concatenate([np.arange(a, b) for a, b in block])
-        local = lay.band_local(cand)
-        kl = keys_of(local, r_local, cand)
-        kl_n[cand] = kl.mask.sum(axis=0)
+        kl = keyframes.pack(keys_of(lay.band_local(cand), r_local, cand))
+        kl_n[cand] = np.diff(kl.start)
         at = 0
-        for a, b in block:  # a run is paths a..b of out_track and at..at + b - a of local: slices, no copies
+        for a, b in block:
             if pays(a, ((kh_n[a:b] - kl_n[a:b]) * costs.key).sum()):
                 wrapped_runs.append((a, b))
                 wrapped[a:b] = True
-                out_track[:, a:b] = local[:, at:at + b - a]
-                keys.mask[:, a:b], keys.values[:, a:b] = kl.mask[:, at:at + b - a], kl.values[:, at:at + b - a]
+                local_keys[a] = kl.part(at, at + b - a)
             at += b - a
-        del local, kl
+        del kl
     head_bytes = costs.transform(lay.head)
     n_keys = np.where(wrapped, kl_n, kh_n)
     transform_bytes = head_bytes + sum(group_bytes[int(lay.band[a])] for a, _ in wrapped_runs)
@@ -490,21 +527,35 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
              "grouped_paths": int(wrapped.sum()), "keys_global": plain_keys,
              "max_gain": float(max(lay.gain.max(), lay.head.gain)) if p else 1.0}
     if grouped_cost >= plain_keys * costs.key:  # the plain encoding is shorter: no groups
-        del keys, out_track
-        lay = lay._replace(head_local=None)
         stats.update(groups=0, grouped_paths=0, transform_bytes=0, keys_rigid=plain_keys)
-        return Plan(lay.order, _tracks(xy, faces, tris[lay.order]), np.full(p, global_radius),
+        return Plan(lay.order, Tracks(np.asarray(xy, np.float32), faces[tris[lay.order]]), np.full(p, global_radius),
                     np.zeros((0, 2), np.int64), np.full(p, -1),
                     np.ones(p), lay.motions, stats, None, None)
     stats.update(transform_bytes=transform_bytes, keys_rigid=int(n_keys.sum()))
+    track = lay.tracks(wrapped_runs)
     lay = lay._replace(head_local=None)
     radius = np.where(wrapped, r_local, r_head)
     band = np.where(wrapped, lay.band, -1)
     gain = np.where(wrapped, lay.gain, lay.head.gain)
-    if len(freeknots.SHAPES_DEG) > 1:
-        keys = freeknots.point_keys(out_track, act, radius, freeknots.SHAPES_DEG[1:], best=keys)
-    return Plan(lay.order, out_track, radius, np.array(wrapped_runs, np.int64).reshape(-1, 2), band, gain,
-                lay.motions, stats, keys, lay.head)
+    starts = np.array([a for a, _ in wrapped_runs], np.int64)
+
+    def best_keys(a: int, b: int) -> keyframes.Keys:  # the squares (band-local where wrapped), refined
+        k = head_keys.unpack(a, b)
+        for i in range(max(int(np.searchsorted(starts, a, "right")) - 1, 0), int(np.searchsorted(starts, b))):
+            ra, rb = wrapped_runs[i]
+            lo, hi = max(a, ra), min(b, rb)
+            if lo < hi:
+                part = local_keys[ra].unpack(lo - ra, hi - ra)
+                k.mask[:, lo - a:hi - a], k.values[:, lo - a:hi - a] = part.mask, part.values
+        if len(freeknots.SHAPES_DEG) > 1:
+            k = freeknots.point_keys(track.take(slice(a, b)), act[:, a:b], radius[a:b], freeknots.SHAPES_DEG[1:],
+                                     best=k)
+        return k._replace(values=k.values[..., :6])
+
+    timeline = collapse.fold_blocks(act, best_keys, max(16, size // 4))  # small blocks: their refining
+    # temporaries (dense keys, jitter) come on top of every path's tracks and keys
+    return Plan(lay.order, track, radius, np.array(wrapped_runs, np.int64).reshape(-1, 2), band, gain,
+                lay.motions, stats, timeline, lay.head)
 
 
 def _plain_keys(xy: np.ndarray, faces: np.ndarray, tris: np.ndarray, active: np.ndarray, radius: float,

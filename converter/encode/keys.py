@@ -41,6 +41,45 @@ class Keys(NamedTuple):
     first_active: np.ndarray  # int (N,): first active frame, -1 when the track is never active
 
 
+class Packed(NamedTuple):
+    """Keys with only the key values stored: a few per track where Keys holds T + 1 (the rigid plan keeps every
+    path's keys while it decides its groups, ~50 of 336 frames on a capture)."""
+
+    mask: np.ndarray  # bool (T + 1, N) as Keys.mask
+    values: np.ndarray  # (K, D) the values at the keys, track by track, each track's by frame
+    first_active: np.ndarray  # int (N,) as Keys.first_active
+    start: np.ndarray  # int (N + 1,) where each track's values begin, then K
+
+    def part(self, a: int, b: int) -> Packed:
+        """Tracks a..b-1."""
+        s = self.start[a:b + 1]
+        return Packed(self.mask[:, a:b], self.values[s[0]:s[-1]], self.first_active[a:b], s - s[0])
+
+    def unpack(self, a: int, b: int) -> Keys:
+        """Dense Keys of tracks a..b-1 (values zero where not a key)."""
+        sub = self.mask[:, a:b]
+        pk, fk = np.nonzero(sub.T)
+        values = np.zeros((sub.shape[0], sub.shape[1], self.values.shape[1]), self.values.dtype)
+        values[fk, pk] = self.values[self.start[a]:self.start[b]]
+        return Keys(sub.copy(), values, self.first_active[a:b])
+
+
+def pack(keys: Keys) -> Packed:
+    """keys with only their key values kept."""
+    pk, fk = np.nonzero(keys.mask.T)
+    start = np.zeros(keys.mask.shape[1] + 1, np.int64)
+    np.cumsum(np.count_nonzero(keys.mask, axis=0), out=start[1:])
+    return Packed(keys.mask, keys.values[fk, pk], keys.first_active, start)
+
+
+def join(parts: list[Packed]) -> Packed:
+    """Packed keys of consecutive tracks, one after another."""
+    ends = np.cumsum([0] + [p.start[-1] for p in parts])
+    return Packed(np.concatenate([p.mask for p in parts], axis=1), np.concatenate([p.values for p in parts]),
+                  np.concatenate([p.first_active for p in parts]),
+                  np.concatenate([[0]] + [p.start[1:] + e for p, e in zip(parts, ends[:-1])]).astype(np.int64))
+
+
 def reduce(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray) -> Keys:
     """Greedy keys on sampled values for tracks x (T, N, D), within eps per coordinate where active."""
     x = np.ascontiguousarray(x, np.float64)

@@ -33,13 +33,14 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from converter import playcost
+from converter import heap, playcost
 from converter.arrays import lexsort_ints
 from converter.encode import collapse, freeknots, groups, merge
 from converter.encode import keys as keyframes
 from converter.encode import steps as held
 from converter.encode.budget import ErrorBudget, viewbox_scale
 from converter.encode.order import draw_list
+from converter.encode.tracks import Tracks
 from converter.errors import InputError
 from converter.options import ConversionOptions, Report
 from converter.sheet import Sheet
@@ -54,8 +55,8 @@ STROKE_PX = 0.5  # stroke of the fill colour hides anti-aliasing seams between n
 COLOR_TIME_LEVELS = 0.1  # of which rounding the colour keyTimes may take
 BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime): what groups weigh
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
-KEY_TEXT_KEYS = 1 << 17  # keys whose d and keyTimes texts exist at once (a block of paths)
-RAW_COUNT_CELLS = 1 << 19  # vertex-frames per block when counting the raw encoding's bytes (~40 MB of temporaries)
+KEY_TEXT_KEYS = 1 << 15  # keys whose d and keyTimes texts exist at once (a block of paths)
+RAW_COUNT_CELLS = 1 << 17  # vertex-frames per block when counting the raw encoding's bytes (~10 MB of temporaries)
 RAW_WRITE_PATHS = 128  # paths per block when writing it (its one format call holds 18 objects per tri-frame)
 
 
@@ -294,12 +295,13 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     if mode == "bounded" and options.rigid and p:
         costs = groups.Costs(lambda m: len(group_open(m, t, dur)), len(CLOSE), BYTES_PER_KEY)
         plan = groups.plan(sheet.xy, sheet.faces, sheet.part_ids, sheet.neutral, tris, active, budget, costs)
+        heap.give_back()  # the plan's temporaries, before the text's
         if plan.head is not None:  # else nothing pays for a group: the plain encoding, byte for byte
             tris, active, track = tris[plan.order], np.take(active, plan.order, axis=1), plan.track
         else:
             plan = None
-    if plan is None:  # float32 as stored (the free-knot pass reduces a float64 copy a block of paths at a time)
-        track = np.take(sheet.xy, sheet.faces[tris], axis=1).reshape(t, p, 6)
+    if plan is None:  # the Sheet's float32 vertices, read a block of paths at a time
+        track = Tracks(np.asarray(sheet.xy, np.float32), sheet.faces[tris])
     joined = None
     if mode == "bounded" and options.max_animations is not None and p > options.max_animations:
         joined, tris, active, track, plan = _merge_plan(sheet, tris, active, track, plan, options)
@@ -310,7 +312,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
         owned = [track, _timeline(track, active, budget, plan)]
         del track  # _encode_keyed lets the track go once the geometry is written
         if plan is not None:  # its keys live on only in the timeline, its track in owned
-            plan = plan._replace(keys=None, track=None)
+            plan = plan._replace(timeline=None, track=None)
         body, scale, enc = _encode_keyed(sheet, budget, tris, active, owned, dur, report, plan,
                                          options.color_tolerance, joined)
         extra["encoding"].update(enc)
@@ -324,10 +326,12 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     report.counts["layer_copies"] = int(len(tris) - len(np.unique(tris)))
     if mode in ("raw", "chapter"):  # already bytes, a block of paths each: joined once, never as one str
         return b"\n".join(["\n".join(head).encode("utf-8"), *body, b"</g></svg>\n"])
-    return ("\n".join(head + body) + "\n</g></svg>\n").encode("utf-8")
+    text = "\n".join([*head, *body, "</g></svg>\n"])
+    del body  # the document's text alone, then its bytes
+    return text.encode("utf-8")
 
 
-def _merge_plan(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.ndarray, plan: groups.Plan | None,
+def _merge_plan(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: Tracks, plan: groups.Plan | None,
                 options: ConversionOptions):
     """converter.encode.merge's sets for the paths, and the paths, their tracks and the plan in its order."""
     segment = np.zeros(len(tris), np.int64)
@@ -339,17 +343,15 @@ def _merge_plan(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.nd
                         np.take(sheet.xy, sheet.faces[tris], axis=1), options.max_animations)
     o = joined.order
     if plan is not None:
-        keys = plan.keys._replace(mask=np.take(plan.keys.mask, o, axis=1), values=np.take(plan.keys.values, o, axis=1),
-                                  first_active=plan.keys.first_active[o])
-        plan = plan._replace(track=np.take(plan.track, o, axis=1), radius=plan.radius[o], band=plan.band[o],
-                             gain=plan.gain[o], keys=keys)
+        plan = plan._replace(track=plan.track.reorder(o), radius=plan.radius[o], band=plan.band[o],
+                             gain=plan.gain[o], timeline=collapse.take_paths(plan.timeline, o))
         track = plan.track
     else:
-        track = np.take(track, o, axis=1)
+        track = track.reorder(o)
     return joined, tris[o], np.take(active, o, axis=1), track, plan
 
 
-def _merged_geometry(track: np.ndarray, active: np.ndarray, radius: np.ndarray, gain: np.ndarray,
+def _merged_geometry(track: Tracks, active: np.ndarray, radius: np.ndarray, gain: np.ndarray,
                      sets: list[tuple[int, int]], budget: ErrorBudget, dur: str) -> tuple[list[str], list[str], int]:
     """Per merged set (first, one-past-last path) its <animate> of d and frame-0 d: one subpath per path, every
     point keyed together (free knots within the set's radius wherever any of its paths shows), each path
@@ -367,7 +369,7 @@ def _merged_geometry(track: np.ndarray, active: np.ndarray, radius: np.ndarray, 
     return anims, firsts, n_keys
 
 
-def _merged_band(track: np.ndarray, active: np.ndarray, radius: np.ndarray, gain: np.ndarray,
+def _merged_band(track: Tracks, active: np.ndarray, radius: np.ndarray, gain: np.ndarray,
                  sets: list[tuple[int, int]], budget: ErrorBudget, dur: str) -> tuple[list[str], list[str], int]:
     """_merged_geometry of sets keyed together, each padded to the largest (its last path repeated: the same
     bound twice, no other key)."""
@@ -376,7 +378,7 @@ def _merged_band(track: np.ndarray, active: np.ndarray, radius: np.ndarray, gain
     width = max(b - a for a, b in sets)
     idx = np.array([[min(a + i, b - 1) for i in range(width)] for a, b in sets], np.int64)  # (Q, M) padded
     q = len(sets)
-    joint_track = np.take(track, idx, axis=1).reshape(t, q, width * 6)
+    joint_track = track.take(idx.ravel()).reshape(t, q, width * 6)
     keys = freeknots.point_keys(joint_track, np.take(active, idx, axis=1).any(axis=2), radius[idx[:, 0]])
     members = np.concatenate([np.arange(a, b) for a, b in sets])
     set_of = np.repeat(np.arange(q), [b - a for a, b in sets])
@@ -448,7 +450,7 @@ def raw_values_bytes(xy: np.ndarray, corners: np.ndarray) -> int:
     return total + (t + 1) * p * (7 + 1) - p  # M L L Z and two commas per value, ';' between values
 
 
-def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.ndarray, dur: str,
+def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: Tracks, dur: str,
                 chapter: bool = False) -> list[bytes]:
     """The raw file: every frame's coordinates (2 decimals) as evenly spaced values (frame k at k/T, the last
     held to T); fill, stroke and display as discrete animations where they change. With chapter=True the
@@ -463,7 +465,7 @@ def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: np.nd
     ids = path_ids(tris)
     for a in range(0, p, RAW_WRITE_PATHS):
         sl = slice(a, a + RAW_WRITE_PATHS)
-        lines = _raw_block(np.take(sheet.face_rgb, tris[sl], axis=1), active[:, sl], track[:, sl], ids[sl], kt,
+        lines = _raw_block(np.take(sheet.face_rgb, tris[sl], axis=1), active[:, sl], track.take(sl), ids[sl], kt,
                            kt_lin, dur, chapter)
         out.append("\n".join(lines).encode("utf-8"))
     return out
@@ -547,7 +549,7 @@ def _varying(pk: np.ndarray, p: int, rows: np.ndarray) -> np.ndarray:
     return out
 
 
-def _uniform_instead(attribute: str, track: np.ndarray, active: np.ndarray, counts: np.ndarray,
+def _uniform_instead(attribute: str, track: Tracks, active: np.ndarray, counts: np.ndarray,
                      keyed_len: np.ndarray, value_len: np.ndarray, scale: float, radius: float | np.ndarray,
                      pairs: bool, fmt, dur: str, anims: list[str]) -> dict[int, np.ndarray]:
     """Replace a path's keyed animation by evenly spaced keys (no keyTimes) where that is shorter.
@@ -569,7 +571,7 @@ def _uniform_instead(attribute: str, track: np.ndarray, active: np.ndarray, coun
         worth = head + cand * (value_len[todo] + 1) - 1 < keyed_len[todo]
         for n in np.unique(cand[worth]).tolist():
             idx = todo[worth & (cand == n)]
-            q, ok = keyframes.uniform_fit(np.asarray(np.take(track, idx, axis=1), np.float64),
+            q, ok = keyframes.uniform_fit(np.asarray(track.take(idx), np.float64),
                                           np.take(active, idx, axis=1), n, scale,
                                           radius if np.isscalar(radius) else radius[idx], pairs)
             for j, col in zip(idx[ok].tolist(), np.flatnonzero(ok).tolist()):
@@ -622,12 +624,16 @@ def _radius(budget: ErrorBudget, plan: groups.Plan | None) -> tuple[float | np.n
     return plan.radius, budget.fit_bound / plan.gain
 
 
-def _timeline(track: np.ndarray, active: np.ndarray, budget: ErrorBudget,
+def _timeline(track: Tracks, active: np.ndarray, budget: ErrorBudget,
               plan: groups.Plan | None) -> collapse.Timeline:
-    """The paths' keys within the budget, hidden frames collapsed (collapse.py): the plan's keys where it
-    reduced these tracks to decide its groups, else free knots now."""
-    keys = plan.keys if plan is not None else freeknots.point_keys(track, active, _radius(budget, plan)[0])
-    return collapse.fold(keys._replace(values=keys.values[..., :6]), active)
+    """The paths' keys within the budget, hidden frames collapsed (collapse.py): the plan's, which it worked out
+    to decide its groups, else free knots now, a block of paths at a time."""
+    if plan is not None:
+        return plan.timeline
+    radius = np.broadcast_to(np.asarray(_radius(budget, plan)[0], np.float64), (track.shape[1],))
+    return collapse.fold_blocks(active, lambda a, b: freeknots.point_keys(track.take(slice(a, b)), active[:, a:b],
+                                                                          radius[a:b]),
+                                freeknots.block_tracks(active.shape[0]))
 
 
 def _d_animations(tl: collapse.Timeline, p: int, t: int, gain: np.ndarray | None, view_scale: int,
@@ -674,7 +680,7 @@ def _d_animations(tl: collapse.Timeline, p: int, t: int, gain: np.ndarray | None
 def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: np.ndarray, owned: list,
                   dur: str, report: Report, plan: groups.Plan | None = None,
                   color_tolerance: float = 3.0, joined: merge.Merge | None = None) -> tuple[list[str], int, dict]:
-    """The error-bounded integer encoding (module docstring) of the paths' tracks (T, P, 6) and their keys
+    """The error-bounded integer encoding (module docstring) of the paths' tracks (encode.tracks) and their keys
     (collapse.Timeline) within budget, handed over as owned = [track, timeline] (emptied here, so that each is
     freed as soon as it is used: on a long capture they are the largest arrays); plan: rigid groups (local
     tracks); colours within color_tolerance levels; joined: paths drawn as one element (converter.encode.merge)."""
@@ -687,6 +693,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     radius, bound = _radius(budget, plan)
     geo = _d_animations(tl, p, t, plan.gain if plan is not None else None, view_scale, time_budget, dur)
     del tl
+    heap.give_back()  # the key texts' blocks
     d_anims, d_first, n_keys, moving, off, key_counts, per_key, decimals = geo
     color_tol = color_tolerance
     enc = {"scale": view_scale, "tolerance": tol, "fit_px": round(float(np.min(radius)), 6),
@@ -700,6 +707,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     d_uniform = _uniform_instead("d", track, active, key_counts, d_len, per_key, view_scale,
                                  bound, True, lambda v, j: _path_strings(v, np.broadcast_to(off[j], (len(v), 2))),
                                  dur, d_anims)
+    heap.give_back()  # the fits' temporaries
     for j in [j for j in d_uniform if active[0, j]]:  # the static d holds frame 0 as played where it is shown
         d_first[j] = _path_strings(d_uniform[j][:1], off[j:j + 1])[0]
     if sets:  # a merged path's d is keyed for all its triangles together
@@ -745,6 +753,10 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
             opens[a] = texts[band]
             closes.add(b - 1)
     merged = {a: k for k, (a, _) in enumerate(sets)}
+    kept = np.ones(p, bool)
+    kept[inside] = False
+    animated = sum(1 for a, k in zip(d_anims, kept.tolist()) if a and k) + (sum(map(bool, m_anims)) if sets else 0)
+    report.counts["color_animations"] = sum(map(bool, c_anims))  # counted now: the loop hands each text over
     for a, b in zip(starts[:-1].tolist(), starts[1:].tolist()):
         if a in opens:
             out.append(opens[a])
@@ -754,6 +766,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
             el = f'<path id="{ids[a]}" class="c{cls[a]}" d="{m_first[k]}"'
         else:
             body = d_anims[a] + c_anims[a]
+            d_anims[a] = c_anims[a] = ""  # each text lives on only in the document's
             el = f'<path id="{ids[a]}" class="c{cls[a]}"{moves[a]} d="{d_first[a]}"'
         out.append(f"{el}>{body}</path>" if body else f"{el}/>")
         if b - 1 in closes:
@@ -761,9 +774,6 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     if sets:  # the merged paths' own keys replace their triangles' single ones in the counts
         inside_keys = int(key_counts[inside].sum())
         n_keys += m_keys - inside_keys
-        kept = np.ones(p, bool)
-        kept[inside] = False
-        d_anims = [a for a, k in zip(d_anims, kept.tolist()) if k] + m_anims
         report.counts["merged_paths"] = len(sets)
         report.counts["merged_triangles"] = int(len(inside))
         report.counts["merge_palette"] = joined.colours
@@ -773,8 +783,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     report.counts["color_keys"] = n_color_keys
     report.counts["static_paths"] = int((~moving).sum())
     report.counts["palette"] = len(palette)
-    report.counts["color_animations"] = int(sum(1 for a in c_anims if a))
-    report.counts["animated_paths"] = int(sum(1 for a in d_anims if a))
+    report.counts["animated_paths"] = animated
     err = color_error(sheet.face_rgb, active, ckeys, tris)
     report.figures["color_error_max_levels"] = float(err.max(initial=0.0))
     report.figures["color_error_p99_levels"] = float(np.percentile(err, 99, overwrite_input=True)) if err.size else 0.0

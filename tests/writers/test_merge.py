@@ -7,6 +7,7 @@ import pytest
 
 from converter import formats
 from converter.encode import merge
+from converter.encode.tracks import Tracks
 from converter.errors import InputError
 from converter.extract import extract, fit_camera
 from converter.options import PRESETS, ConversionOptions, Report
@@ -60,7 +61,8 @@ def test_merged_sets_keyed_in_size_bands_match_one_padded_width():
     sets = [(0, 2), (2, 3), (3, 14), (14, 17), (17, 19), (19, 23)]
     sets = [s for s in sets if s[1] - s[0] > 1]
     budget = svg_anim.ErrorBudget.split(0.25, 256)
-    args = (track, active, np.full(p, budget.keys), np.ones(p))
+    tracks = Tracks(track.reshape(t, 3 * p, 2), np.arange(3 * p).reshape(p, 3))  # each corner its own vertex
+    args = (tracks, active, np.full(p, budget.keys), np.ones(p))
     banded = svg_anim._merged_geometry(*args, sets, budget, "1.6s")
     single = svg_anim._merged_band(*args, sets, budget, "1.6s")
     assert len(set(np.ceil(np.log2([b - a for a, b in sets])).tolist())) >= 3
