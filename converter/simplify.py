@@ -19,6 +19,7 @@ import ctypes
 import numpy as np
 
 from converter.animation import FaceAnimation
+from converter.arrays import lengths
 from converter.errors import InputError
 from converter.extract import FRAME_BLOCK, cull, fit_camera
 from converter.options import ConversionOptions, Report
@@ -237,7 +238,7 @@ def budget_deviation_px(original: FaceAnimation, simplified: FaceAnimation, face
             # (F, n) triangle-vertex incidence.
             shown = (visible[:, in_part].astype(np.float32) @ incidence) > 0
             follow = sum(bary[None, :, c, None] * xy1[:, corner[:, c]] for c in range(3))  # (B, n, 2)
-            dev = np.where(shown, np.linalg.norm(follow - xy0[:, verts], axis=-1), 0.0)
+            dev = np.where(shown, lengths(follow - xy0[:, verts]), 0.0)
             if dev.size:
                 per_part[p] = max(per_part[p], float(dev.max()))
             total += float(dev.sum())

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 from lxml import etree
 
+from converter.arrays import lengths
 from converter.camera import Camera
 from converter.convert import load, prepare
 from converter.encode.groups import apply_linear
@@ -399,7 +400,7 @@ def compare(ev: Evaluated, exact_xy: np.ndarray, expected_visible: np.ndarray, f
     if ev.triangles.max() >= len(faces):
         raise InputError("the SVG names triangles the input does not have; pass the input it was made from.")
     exact = np.take(exact_xy, faces[ev.triangles], axis=1)  # (T, P, 3, 2)
-    dist = np.linalg.norm(ev.xy - exact, axis=-1)  # (T, P, 3)
+    dist = lengths(ev.xy - exact)  # (T, P, 3)
     dist = np.where(np.isnan(dist), np.inf, dist)
     shown = ev.shown
     if ev.collapsed is not None:  # a visible triangle smaller than the tolerance may be drawn as its point

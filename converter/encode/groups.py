@@ -50,7 +50,7 @@ from scipy.cluster.vq import kmeans2
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import LinearOperator, eigsh
 
-from converter.arrays import unique_ints
+from converter.arrays import lengths, unique_ints
 from converter.encode import collapse, freeknots
 from converter.encode import keys as keyframes
 from converter.encode.budget import ErrorBudget
@@ -205,7 +205,7 @@ def merge_by_motion(piece: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutra
         errors = []
         for _, fit, centre in bands:
             pred = apply_linear(fit[:, :, :2], ref - centre) + fit[:, None, :, 2]
-            errors.append(np.percentile(np.linalg.norm(pred - np.take(xy, verts, axis=1), axis=-1), 95))
+            errors.append(np.percentile(lengths(pred - np.take(xy, verts, axis=1)), 95))
         if errors and (min(errors) <= threshold or size < small):
             out[piece == pid] = bands[int(np.argmin(errors))][0]
             continue

@@ -30,6 +30,7 @@ import numpy as np
 from scipy import sparse
 from scipy.linalg import solveh_banded
 
+from converter.arrays import lengths
 from converter.encode import parallel
 
 
@@ -206,6 +207,6 @@ def uniform_fit(x: np.ndarray, active: np.ndarray, n_keys: int, scale: float,
     v = solveh_banded(band, a.T @ flat + lam * prior)
     q = np.rint(v * scale)
     dev = (a @ (q / scale) - flat).reshape(t, n, d // 2, 2) if pairs else (a @ (q / scale) - flat).reshape(t, n, d, 1)
-    err = (np.linalg.norm(dev, axis=-1) if pairs else np.abs(dev[..., 0])).max(axis=-1)
+    err = (lengths(dev) if pairs else np.abs(dev[..., 0])).max(axis=-1)
     ok = ~(np.where(active, err, 0.0) > radius).any(axis=0)
     return q.reshape(n_keys, n, d).astype(np.int64), ok

@@ -34,7 +34,7 @@ from xml.sax.saxutils import escape
 import numpy as np
 
 from converter import heap, playcost
-from converter.arrays import lexsort_ints
+from converter.arrays import lengths, lexsort_ints
 from converter.encode import collapse, freeknots, groups, merge
 from converter.encode import keys as keyframes
 from converter.encode import steps as held
@@ -595,7 +595,7 @@ def timeline_key_times(tl: collapse.Timeline, rows: np.ndarray, t: int, px: floa
     if k > 1:
         same = pk[1:] == pk[:-1]
         dv = np.diff(rows.astype(np.float64), axis=0)
-        step = np.linalg.norm(dv.reshape(len(dv), -1, 2), axis=-1).max(axis=1) * np.broadcast_to(px, (k,))[:-1]
+        step = lengths(dv.reshape(len(dv), -1, 2)).max(axis=1) * np.broadcast_to(px, (k,))[:-1]
         seg = np.where(same, step / np.maximum(np.diff(half), 1) * 2, 0.0)  # per frame
         plain = np.where(tl.collapsed[1:] | tl.collapsed[:-1], 0.0, seg)
         slope[:-1] = seg
