@@ -97,8 +97,7 @@ def fold_blocks(active: np.ndarray, keys_of: Callable[[int, int], Keys], size: i
 
 def take_paths(tl: Timeline, order: np.ndarray) -> Timeline:
     """The timeline of paths order (indices into tl's paths), renumbered 0..len(order)-1."""
-    n = int(tl.path[-1]) + 1 if len(tl.path) else 0
-    bounds = np.searchsorted(tl.path, np.arange(max(n, int(order.max(initial=-1)) + 1) + 1))
+    bounds = np.searchsorted(tl.path, np.arange(int(order.max(initial=-1)) + 2))
     counts = np.diff(bounds)[order]
     first = np.repeat(bounds[order] - np.cumsum(counts) + counts, counts)
     idx = first + np.arange(int(counts.sum()))

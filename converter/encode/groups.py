@@ -237,13 +237,7 @@ def motion_clusters(band: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutral
     res = np.take(xy, verts, axis=1)
     res -= fitted
     del fitted
-    mean = res.mean(axis=0)
-    spread, dy = res[..., 0] - mean[:, 0], res[..., 1] - mean[:, 1]  # |res - mean| as np.linalg.norm works it,
-    np.square(spread, out=spread)  # a coordinate at a time: no temporaries of res's size
-    np.square(dy, out=dy)
-    spread += dy
-    del dy
-    np.sqrt(spread, out=spread)
+    spread = lengths(res - res.mean(axis=0))
     if np.percentile(spread, 95) <= MERGE_PX:
         return out  # the head moves rigidly: one band explains it
     del spread
