@@ -522,7 +522,7 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
              "max_gain": float(max(lay.gain.max(), lay.head.gain)) if p else 1.0}
     if grouped_cost >= plain_keys * costs.key:  # the plain encoding is shorter: no groups
         stats.update(groups=0, grouped_paths=0, transform_bytes=0, keys_rigid=plain_keys)
-        return Plan(lay.order, Tracks(np.asarray(xy, np.float32), faces[tris[lay.order]]), np.full(p, global_radius),
+        return Plan(lay.order, Tracks.screen(xy, faces[tris[lay.order]]), np.full(p, global_radius),
                     np.zeros((0, 2), np.int64), np.full(p, -1),
                     np.ones(p), lay.motions, stats, None, None)
     stats.update(transform_bytes=transform_bytes, keys_rigid=int(n_keys.sum()))
@@ -560,20 +560,15 @@ def _plain_keys(xy: np.ndarray, faces: np.ndarray, tris: np.ndarray, active: np.
     p = len(tris)
     steps = [s for s in (PLAIN_SAMPLE ** 2, PLAIN_SAMPLE) if p >= 50 * s] or [1]  # >= 50 paths in a sample
     keys_n = 0
+    screen = Tracks.screen(xy, faces[tris])
     for i, step in enumerate(steps):
         sample = np.arange(0, p, step)
-        plain = freeknots.point_keys(_tracks(xy, faces, tris[sample]), np.take(active, sample, axis=1),
+        plain = freeknots.point_keys(screen.take(sample), np.take(active, sample, axis=1),
                                      np.full(len(sample), max(radius, 1e-6)), freeknots.SHAPES_DEG[:1])
         keys_n = int(round(plain.mask.sum() * p / len(sample)))
         if i == len(steps) - 1 or abs(keys_n - grouped_keys) > PLAIN_MARGIN * grouped_keys:
             break
     return keys_n
-
-
-def _tracks(xy: np.ndarray, faces: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """Screen tracks (T, P, 6) px of the triangles tris, float32 as the Sheet stores them (the free-knot pass
-    reads them where they lie and works in float64)."""
-    return np.asarray(np.take(xy, faces[tris], axis=1), np.float32).reshape(xy.shape[0], len(tris), 6)
 
 
 def _run_blocks(runs: list[tuple[int, int]], size: int) -> list[list[tuple[int, int]]]:

@@ -21,6 +21,12 @@ class Tracks(NamedTuple):
     verts: np.ndarray  # float (T, W, 2) px, float32 as the Sheet stores them
     corners: np.ndarray  # int (P, 3) rows of verts
 
+    @classmethod
+    def screen(cls, xy: np.ndarray, corners: np.ndarray) -> Tracks:
+        """The screen tracks of triangles with vertex ids corners (P, 3) over a Sheet's xy (T, V, 2): float32 as
+        the Sheet stores them, no copy when it does."""
+        return cls(np.asarray(xy, np.float32), corners)
+
     @property
     def shape(self) -> tuple[int, int, int]:
         """(T, P, 6), the dense array's shape."""

@@ -301,7 +301,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
         else:
             plan = None
     if plan is None:  # the Sheet's float32 vertices, read a block of paths at a time
-        track = Tracks(np.asarray(sheet.xy, np.float32), sheet.faces[tris])
+        track = Tracks.screen(sheet.xy, sheet.faces[tris])
     joined = None
     if mode == "bounded" and options.max_animations is not None and p > options.max_animations:
         joined, tris, active, track, plan = _merge_plan(sheet, tris, active, track, plan, options)

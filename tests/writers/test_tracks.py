@@ -31,6 +31,9 @@ def test_tracks_give_the_dense_array(seed):
     order = np.random.default_rng(seed).permutation(len(corners))
     assert np.array_equal(tr.reorder(order).take(slice(None)), dense[:, order])
     assert [(s.start, s.stop) for s in blocks(10, 4)] == [(0, 4), (4, 8), (8, 10)] and blocks(0, 4) == []
+    assert Tracks.screen(verts, corners).verts is verts  # the Sheet's float32 xy: read where it lies
+    wide = Tracks.screen(verts.astype(np.float64), corners)
+    assert wide.verts.dtype == np.float32 and np.array_equal(wide.take(idx), dense[:, idx])
 
 
 def test_vertex_local_tracks_are_the_corners_bits():
