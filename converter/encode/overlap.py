@@ -21,9 +21,11 @@ from converter.encode import parallel
 # slower; on its 128k-triangle subdivision (2 px triangles) 2 frames took 8.2 s where 8 took 14.6 and 16 26.4.
 BLOCK_RANGE = (2, 32)
 MOTION_FRAMES = 50  # the motion a frame is the median over the first this many frames
+CELL_BOXES = 1.5  # grid cell side, in median box sides (largest side) of the block
 STROKE_MARGIN_PX = 0.5  # two paths closer than this may share stroke pixels: their order is kept
 EMPTY = -1  # a free slot of a PairSet's table
-PAIRSET_BITS = 16  # a PairSet starts with 2^16 slots (512 KB) and doubles when half full
+PAIRSET_BITS = 12  # a PairSet starts with 2^12 slots (64 KB) and grows when half full
+TILE = 8  # a PairSet keeps the pairs of TILE x TILE paths in one 64-bit word
 
 
 # The compiled helpers address a triangle as (pts, frame, path), never as a slice, and are inlined: a slice or an
@@ -114,40 +116,41 @@ def _boxes(pts, on, grow):
 
 
 def _cell_lists(lo: np.ndarray, hi: np.ndarray, cell: float,
-                band: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Boxes [lo, hi] (N, 2) of bands (N,) on a grid of side cell: (cell key, box) for every cell a box covers,
-    sorted by key, then by band, then by box; and each box's lowest cell (N, 2)."""
+                band: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Boxes [lo, hi] (N, 2) of bands (N,) on a grid of side cell: an entry for every cell a box covers, sorted by
+    cell (along a Z-order curve, so consecutive cells hold nearby paths), then by band, then by box. Per entry:
+    its cell's key, its box's number, box (lo, hi as 4 values), band, and a flag (bit 0: the cell is the box's
+    lowest in x, bit 1: in y), each array in entry order so a cell's entries are read in one sweep."""
     c0 = np.floor(lo / cell).astype(np.int64)
     span = np.floor(hi / cell).astype(np.int64) - c0 + 1
     n_cells = span[:, 0] * span[:, 1]
     owner = np.repeat(np.arange(len(lo)), n_cells)
     local = np.arange(int(n_cells.sum())) - np.repeat(np.cumsum(n_cells) - n_cells, n_cells)
     sx = np.repeat(span[:, 0], n_cells)
-    cx = np.repeat(c0[:, 0], n_cells) + local % sx
-    cy = np.repeat(c0[:, 1], n_cells) + local // sx
-    key = _cell_key(cx, cy, c0[:, 0].min(), c0[:, 1].min())
+    dx, dy = local % sx, local // sx  # the entry's cell past its box's lowest
+    cxy = np.take(c0 - c0.min(axis=0), owner, axis=0)
+    cxy[:, 0] += dx
+    cxy[:, 1] += dy
+    key = z_order(cxy.astype(np.uint64)).astype(np.int64)
     order = lexsort_ints((band[owner], key))  # stable, and owner rises already: then by box
-    return key[order], owner[order], c0
+    owner = owner[order]
+    flag = ((dx[order] == 0) | ((dy[order] == 0) << 1)).astype(np.uint8)
+    return key[order], owner, np.take(np.concatenate([lo, hi], axis=1), owner, axis=0), band[owner], flag
 
 
 @numba.njit(cache=True, nogil=True)
-def _cell_key(cx, cy, x0, y0):
-    """One integer per grid cell (cx, cy) (scalars or arrays) at or past the cell (x0, y0)."""
-    return (cx - x0) * (1 << 31) + (cy - y0)
+def _candidates(key, owner, box, band, flag, idx, table, shift, nb, room):
+    """Pairs (a < b) (M, 2) of boxes of different band that meet and whose paths (idx[a], idx[b]) are not yet in
+    the PairSet table (room: a first guess at M), from the entries of _cell_lists: a cell's boxes of one band are
+    consecutive, so only pairs across its bands are looked at, and a cell inside one band costs one pass (on the
+    128k-triangle face, 43 % of the cells and half the pairs within cells: 19.7 -> 13.8 s over its 335 frames).
 
-
-@numba.njit(cache=True, nogil=True)
-def _candidates(key, owner, c0, band, lo, hi, out) -> int:
-    """Pairs (a < b) of boxes of different band that meet, into out (M, 2) (only counted once it is full). The
-    cell lists come from _cell_lists with band: a cell's boxes of one band are consecutive, so only pairs across
-    its bands are looked at, and a cell inside one band costs one pass (on the 128k-triangle face, 43 % of the
-    cells and half the pairs within cells: 19.7 -> 13.8 s over its 335 frames).
-
-    Each pair is reported in one cell only: the cell holding the low corner of the two boxes' intersection,
-    max(c0[a], c0[b]), which both cover when they meet."""
+    Each pair is reported in one cell only: the cell holding the low corner of the two boxes' intersection, which
+    both cover when they meet: there, in x and in y, the cell is the lowest of one of the two boxes."""
+    out = np.empty((max(room, 16), 2), np.int64)
+    near = np.empty(len(key), np.bool_)
     m = 0
     start = 0
-    x0, y0 = c0[:, 0].min(), c0[:, 1].min()
     while start < len(key):
         stop = start + 1
         while stop < len(key) and key[stop] == key[start]:
@@ -155,56 +158,75 @@ def _candidates(key, owner, c0, band, lo, hi, out) -> int:
         g0 = start
         while g0 < stop:  # one band's boxes g0..g1-1 against the cell's later bands
             g1 = g0 + 1
-            while g1 < stop and band[owner[g1]] == band[owner[g0]]:
+            while g1 < stop and band[g1] == band[g0]:
                 g1 += 1
             for i in range(g0, g1):
-                a = owner[i]
+                # The box test over the cell's later bands first, without branches (the compiler vectorises it).
+                x0, y0, x1, y1, fi = box[i, 0], box[i, 1], box[i, 2], box[i, 3], flag[i]
                 for j in range(g1, stop):
-                    b = owner[j]
-                    if (max(lo[a, 0], lo[b, 0]) > min(hi[a, 0], hi[b, 0])
-                            or max(lo[a, 1], lo[b, 1]) > min(hi[a, 1], hi[b, 1])):
+                    near[j - g1] = ((max(x0, box[j, 0]) <= min(x1, box[j, 2]))
+                                    & (max(y0, box[j, 1]) <= min(y1, box[j, 3])) & ((fi | flag[j]) == 3))
+                for j in range(g1, stop):
+                    if not near[j - g1]:
                         continue
-                    if _cell_key(max(c0[a, 0], c0[b, 0]), max(c0[a, 1], c0[b, 1]), x0, y0) != key[start]:
+                    u, v = min(owner[i], owner[j]), max(owner[i], owner[j])
+                    if _has(table, shift, nb, idx[u], idx[v]):
                         continue
-                    if m < out.shape[0]:
-                        out[m, 0], out[m, 1] = min(a, b), max(a, b)
+                    if m == len(out):
+                        grown = np.empty((2 * m, 2), np.int64)
+                        grown[:m] = out
+                        out = grown
+                    out[m, 0], out[m, 1] = u, v
                     m += 1
             g0 = g1
         start = stop
-    return m
+    return out[:m]
 
 
 class PairSet:
-    """A set of pair codes (int64 >= 0), open addressing in one int64 table kept at most half full: memory follows
-    the pairs found, not the paths squared (a bitmap of 27k paths would take 712 MB) nor the blocks (a list of
-    each block's finds, deduplicated at the end, peaked 1.8 GB on a 4,000-frame capture of the ICT head)."""
+    """A set of pairs a < b of paths 0..n-1, as a sparse bitmap: one bit per pair in 8 x 8 tiles of pairs, each
+    tile a 64-bit word beside its number in an open-addressing table (kept at most half full).
 
-    def __init__(self, bits: int | None = None):
+    Memory follows the pairs found, not the paths squared (a bitmap of 27k paths would take 712 MB) nor the
+    blocks (a list of each block's finds, deduplicated at the end, peaked 1.8 GB on a 4,000-frame capture of the
+    ICT head). With paths numbered along the screen (``overlap_pairs``), a path's partners are mostly its
+    neighbours' too: the 11 M pairs of the 128k-triangle bench face fill 1.1 M tiles (64 MB of table), and the
+    250 M look-ups of its search mostly meet tiles read just before. A table of one hashed slot per pair (256 MB)
+    missed the cache on most: 6.6 s of look-ups, against about 2 s."""
+
+    def __init__(self, n: int, bits: int | None = None):
         bits = PAIRSET_BITS if bits is None else bits
-        self.table = np.full(1 << bits, EMPTY, np.int64)
+        self.tiles = max(1, (n + TILE - 1) // TILE)  # tiles a side
+        self.table = np.full((1 << bits, 2), EMPTY, np.int64)  # (tile number, word) per slot
         self.shift = 64 - bits
-        self.count = 0
+        self.used = 0  # slots holding a tile
+        self.count = 0  # pairs
 
-    def absent(self, codes: np.ndarray) -> np.ndarray:
-        """Bool (N,): which codes are not in the set."""
-        out = np.empty(len(codes), np.bool_)
-        _absent(self.table, self.shift, np.ascontiguousarray(codes, np.int64), out)
+    def has(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Bool (N,): which pairs (a[i] < b[i]) are in the set."""
+        a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
+        out = np.empty(len(a), np.bool_)
+        _has_each(self.table, self.shift, self.tiles, a, b, out)
         return out
 
-    def add(self, codes: np.ndarray) -> None:
-        """Add codes (duplicates allowed)."""
-        codes = np.ascontiguousarray(codes, np.int64)
-        if 2 * (self.count + len(codes)) > len(self.table):
-            old = self.table[self.table != EMPTY]
-            bits = max(64 - self.shift, int(2 * (self.count + len(codes)) - 1).bit_length() + 1)
-            self.table = np.full(1 << bits, EMPTY, np.int64)
+    def add(self, a: np.ndarray, b: np.ndarray) -> None:
+        """Add the pairs (a[i] < b[i]) (duplicates allowed)."""
+        a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
+        if 2 * (self.used + len(a)) > len(self.table):  # room for every pair in a new tile
+            bits = int(2 * (self.used + len(a)) - 1).bit_length()
+            old = self.table
+            self.table = np.full((1 << bits, 2), EMPTY, np.int64)
             self.shift = 64 - bits
-            self.count = _add(self.table, self.shift, old)
-        self.count += _add(self.table, self.shift, codes)
+            _rehash(old, self.table, self.shift)
+        used, added = _add(self.table, self.shift, self.tiles, a, b)
+        self.used += used
+        self.count += added
 
-    def sorted(self) -> np.ndarray:
-        """The codes, ascending."""
-        return np.sort(self.table[self.table != EMPTY])
+    def pairs(self) -> tuple[np.ndarray, np.ndarray]:
+        """The pairs (a, b), a < b, by tile."""
+        a, b = np.empty(self.count, np.int64), np.empty(self.count, np.int64)
+        _unpack(self.table, self.tiles, a, b)
+        return a, b
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -213,32 +235,93 @@ def _slot(code, shift):
     return np.int64((np.uint64(code) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(shift))
 
 
-@numba.njit(cache=True, nogil=True)
-def _absent(table, shift, codes, out):
-    """out[i] = codes[i] is not in table."""
+@numba.njit(cache=True, nogil=True, inline="always")
+def _find(table, shift, tile):
+    """The slot of tile in table, or the empty slot where it would go."""
     mask = len(table) - 1
-    for i in range(len(codes)):
-        c = codes[i]
-        s = _slot(c, shift)
-        while table[s] != c and table[s] != EMPTY:
-            s = (s + 1) & mask
-        out[i] = table[s] == EMPTY
+    s = _slot(tile, shift)
+    while table[s, 0] != tile and table[s, 0] != EMPTY:
+        s = (s + 1) & mask
+    return s
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _has(table, shift, nb, a, b) -> bool:
+    """Pair a < b is in the PairSet table of nb tiles a side."""
+    s = _find(table, shift, (a // TILE) * nb + b // TILE)
+    return table[s, 0] != EMPTY and (table[s, 1] >> ((a % TILE) * TILE + b % TILE)) & 1 == 1
 
 
 @numba.njit(cache=True, nogil=True)
-def _add(table, shift, codes) -> int:
-    """Insert codes into table (with room); the number newly inserted."""
-    mask = len(table) - 1
-    n = 0
-    for i in range(len(codes)):
-        c = codes[i]
-        s = _slot(c, shift)
-        while table[s] != c and table[s] != EMPTY:
-            s = (s + 1) & mask
-        if table[s] == EMPTY:
-            table[s] = c
-            n += 1
-    return n
+def _has_each(table, shift, nb, a, b, out):
+    """out[i] = pair a[i] < b[i] is in table."""
+    for i in range(len(a)):
+        out[i] = _has(table, shift, nb, a[i], b[i])
+
+
+@numba.njit(cache=True, nogil=True)
+def _add(table, shift, nb, a, b):
+    """Insert the pairs a[i] < b[i] into table (with room): (tiles begun, pairs new)."""
+    used, added = 0, 0
+    for i in range(len(a)):
+        tile = (a[i] // TILE) * nb + b[i] // TILE
+        s = _find(table, shift, tile)
+        if table[s, 0] == EMPTY:
+            table[s, 0], table[s, 1] = tile, 0
+            used += 1
+        bit = np.int64(1) << ((a[i] % TILE) * TILE + b[i] % TILE)
+        if table[s, 1] & bit == 0:
+            table[s, 1] |= bit
+            added += 1
+    return used, added
+
+
+@numba.njit(cache=True, nogil=True)
+def _rehash(old, table, shift) -> None:
+    """Move the tiles of old into the empty, larger table."""
+    for i in range(len(old)):
+        if old[i, 0] != EMPTY:
+            s = _find(table, shift, old[i, 0])
+            table[s, 0], table[s, 1] = old[i, 0], old[i, 1]
+
+
+@numba.njit(cache=True, nogil=True)
+def _unpack(table, nb, a, b) -> None:
+    """Every pair of table into a, b."""
+    m = 0
+    for i in range(len(table)):
+        tile, word = table[i, 0], table[i, 1]
+        if tile == EMPTY:
+            continue
+        for bit in range(TILE * TILE):
+            if (word >> bit) & 1:
+                a[m] = (tile // nb) * TILE + bit // TILE
+                b[m] = (tile % nb) * TILE + bit % TILE
+                m += 1
+
+
+def screen_order(first: np.ndarray) -> np.ndarray:
+    """A numbering of paths along the screen: the order (P,) of their points first (P, 2) px along a Z-order
+    curve of 1 px cells (non-finite points last), so paths near on screen are mostly near in number."""
+    ok = np.isfinite(first).all(axis=1)
+    cells = np.zeros((len(first), 2), np.uint64)
+    if ok.any():
+        q = np.floor(first[ok] - first[ok].min(axis=0))
+        cells[ok] = np.minimum(q, (1 << 32) - 1).astype(np.uint64)
+    return np.lexsort((z_order(cells), ~ok))
+
+
+def z_order(cells: np.ndarray) -> np.ndarray:
+    """The place of cells (N, 2) (uint64, each < 2^32) along a Z-order curve (uint64): their bits interleaved."""
+    return _spread(cells[:, 0]) | (_spread(cells[:, 1]) << np.uint64(1))
+
+
+def _spread(v: np.ndarray) -> np.ndarray:
+    """The bits of v (< 2^32, uint64) moved to the even bit positions."""
+    for shift, mask in ((16, 0x0000FFFF0000FFFF), (8, 0x00FF00FF00FF00FF), (4, 0x0F0F0F0F0F0F0F0F),
+                        (2, 0x3333333333333333), (1, 0x5555555555555555)):
+        v = (v | (v << np.uint64(shift))) & np.uint64(mask)
+    return v
 
 
 def block_frames(xy_paths: np.ndarray, corners: np.ndarray | None = None) -> int:
@@ -275,34 +358,33 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = 
     block = block_frames(xy_paths, corners) if block is None else block
     xy32 = xy_paths if corners is not None else np.asarray(xy_paths, np.float32)
     m32 = np.float32(margin)
-    found = PairSet()
-    last_m = 0
+    # Paths numbered along the screen (number i is path order[i]): a cell's paths and their pairs' PairSet tiles
+    # are then near in memory.
+    first = (np.take(xy32[0], corners, axis=0) if corners is not None else xy32[0]).mean(axis=1) if t else None
+    order = screen_order(first) if t else np.arange(p)
+    band = band[order] if band is not None else None
+    found = PairSet(p)
     for k0 in range(0, t, block):
-        act = active[k0:k0 + block]
+        act = np.take(active[k0:k0 + block], order, axis=1)
         idx = np.flatnonzero(act.any(axis=0))
         if len(idx) < 2:
             continue
         if corners is None:
-            pts = xy32[k0:k0 + block, idx]  # (B, n, 3, 2)
+            pts = np.take(xy32[k0:k0 + block], order[idx], axis=1)  # (B, n, 3, 2)
         else:
-            pts = np.asarray(np.take(xy32[k0:k0 + block], corners[idx], axis=1), np.float32)
+            pts = np.asarray(np.take(xy32[k0:k0 + block], corners[order[idx]], axis=1), np.float32)
         on = np.take(act, idx, axis=1)
         lo, hi = _boxes(pts, on, np.float32(margin / 2))
-        cell = max(1.5 * float(np.median((hi - lo).max(axis=1))), 1.0)
+        cell = max(CELL_BOXES * float(np.median((hi - lo).max(axis=1))), 1.0)
         own_band = band[idx] if band is not None else np.arange(len(idx))  # most neighbours share a band
-        key, owner, c0 = _cell_lists(lo, hi, cell, own_band)
-        out = np.empty((max(4 * len(idx), last_m + last_m // 4), 2), np.int64)  # blocks alike: rarely twice
-        m = last_m = _candidates(key, owner, c0, own_band, lo, hi, out)
-        if m > len(out):
-            out = np.empty((m, 2), np.int64)
-            _candidates(key, owner, c0, own_band, lo, hi, out)
-        la, lb = out[:m, 0], out[:m, 1]
-        glob = idx[la] * p + idx[lb]
-        fresh = found.absent(glob)  # a pair found in an earlier block is not tested again
-        la, lb, glob = la[fresh], lb[fresh], glob[fresh]
-        meet = np.zeros(len(glob), bool)
-        if len(glob):
-            parallel.threaded(_meet, len(glob), pts, on, la, lb, m32, meet)
-        found.add(glob[meet])
-    code = found.sorted()
+        # Only pairs not found in an earlier block come back, to be tested.
+        fresh = _candidates(*_cell_lists(lo, hi, cell, own_band), idx, found.table, found.shift, found.tiles, len(idx))
+        la, lb = fresh[:, 0], fresh[:, 1]
+        meet = np.zeros(len(fresh), bool)
+        if len(fresh):
+            parallel.threaded(_meet, len(fresh), pts, on, la, lb, m32, meet)
+        found.add(idx[la[meet]], idx[lb[meet]])
+    a, b = found.pairs()
+    a, b = order[a], order[b]
+    code = np.sort(np.minimum(a, b) * p + np.maximum(a, b))
     return np.column_stack([code // p, code % p])

@@ -197,18 +197,44 @@ def test_local_radius_shrinks_with_gain():
 
 def test_pair_set_is_a_set():
     # Against Python's set: duplicates within and across batches, growth from a 2-slot table (every insert
-    # collides and probes, every other one rehashes), codes up to 2^62.
+    # collides and probes, every other one rehashes), every bit of a tile's word (the top one is the sign bit),
+    # pairs within one tile and across far tiles.
     rng = np.random.default_rng(5)
-    pairs, want = overlap.PairSet(bits=1), set()
-    for n in (1, 3, 50, 400, 2000):
-        codes = np.concatenate([rng.integers(0, 5000, n), rng.integers(0, 1 << 62, n)])
-        absent = pairs.absent(codes)
-        assert absent.tolist() == [c not in want for c in codes.tolist()]
-        pairs.add(codes)
-        want |= set(codes.tolist())
-        assert pairs.count == len(want) and 2 * pairs.count <= len(pairs.table)
-    assert pairs.sorted().tolist() == sorted(want)
-    assert not pairs.absent(np.array(sorted(want))).any()
+    n = 5003
+    pairs, want = overlap.PairSet(n, bits=1), set()
+    tile = overlap.TILE
+    corner = [(a, b) for a in range(tile) for b in range(tile, 2 * tile)]  # all 64 bits of tile (0, 1)
+    for size in (1, 3, 50, 400, 2000):
+        a = np.concatenate([rng.integers(0, 40, size), rng.integers(0, n, size)])
+        b = np.concatenate([rng.integers(0, 40, size), rng.integers(0, n, size)])
+        a, b = np.minimum(a, b), np.maximum(a, b)
+        keep = a < b
+        a, b = a[keep], b[keep]
+        if size == 50:
+            a = np.concatenate([a, [p[0] for p in corner]])
+            b = np.concatenate([b, [p[1] for p in corner]])
+        assert pairs.has(a, b).tolist() == [(x, y) in want for x, y in zip(a.tolist(), b.tolist())]
+        pairs.add(a, b)
+        want |= set(zip(a.tolist(), b.tolist()))
+        assert pairs.count == len(want) and 2 * pairs.used <= len(pairs.table)
+    assert set(corner) <= want
+    got = pairs.pairs()
+    assert sorted(zip(*(x.tolist() for x in got))) == sorted(want)
+    assert pairs.has(*got).all()
+    absent = np.array([(x, y) for x in range(0, n, 97) for y in range(x + 1, n, 89) if (x, y) not in want])
+    assert len(absent) > 1000 and not pairs.has(absent[:, 0], absent[:, 1]).any()
+
+
+def test_screen_order_numbers_neighbours_near():
+    # A 64 x 64 grid of points, shuffled: along the Z-order curve consecutive numbers are mostly 1 px apart (in
+    # the shuffled order, ~30 px); non-finite points come last.
+    rng = np.random.default_rng(2)
+    grid = np.stack(np.meshgrid(np.arange(64.0), np.arange(64.0)), -1).reshape(-1, 2)
+    pts = np.concatenate([rng.permutation(grid), [[np.nan, 3.0], [np.inf, np.inf]]])
+    order = overlap.screen_order(pts + 100.25)
+    assert sorted(order.tolist()) == list(range(len(pts))) and order[-2:].tolist() == [4096, 4097]
+    step = np.abs(np.diff(pts[order[:-2]], axis=0)).sum(axis=1)
+    assert np.median(step) == 1 and step.mean() < 2.5
 
 
 @pytest.mark.parametrize(("grows", "bands"), [(False, 2), (True, 2), (False, 7)])
