@@ -63,6 +63,7 @@ HEAD_CLUSTERS = 24  # motion clusters of the largest band (the head)
 CLUSTER_MIN_TRIANGLES = 50  # fewer clusters on small heads: at least this many triangles each
 CLUSTER_COMPONENTS = 12  # principal components of the residual trajectories the clustering uses
 CLUSTER_PLACE_WEIGHT = 0.5  # weight of the neutral position against the motion features (keeps clusters compact)
+SPREAD_FRAMES = 64  # frames a block when measuring how far the head's residual trajectories spread
 MIN_BAND_TRIANGLES = 12  # smaller connected pieces join their part's largest piece
 SMALL_BAND_TRIANGLES, SMALL_BAND_SHARE = 100, 0.02  # pieces below max(these) never get a band of their own
 MERGE_PX = 1.5  # a piece whose motion a larger band explains this well (px, 95th percentile) joins it
@@ -237,7 +238,11 @@ def motion_clusters(band: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutral
     res = np.take(xy, verts, axis=1)
     res -= fitted
     del fitted
-    spread = lengths(res - res.mean(axis=0))
+    mean = res.mean(axis=0)
+    spread = np.empty(res.shape[:2])
+    for sl in blocks(len(res), SPREAD_FRAMES):  # a block of frames at a time: no temporary of res's size
+        spread[sl] = lengths(res[sl] - mean)
+    del mean
     if np.percentile(spread, 95) <= MERGE_PX:
         return out  # the head moves rigidly: one band explains it
     del spread

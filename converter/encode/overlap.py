@@ -121,21 +121,37 @@ def _cell_lists(lo: np.ndarray, hi: np.ndarray, cell: float,
     cell (along a Z-order curve, so consecutive cells hold nearby paths), then by band, then by box. Per entry:
     its cell's key, its box's number, box (lo, hi as 4 values), band, and a flag (bit 0: the cell is the box's
     lowest in x, bit 1: in y), each array in entry order so a cell's entries are read in one sweep."""
-    c0 = np.floor(lo / cell).astype(np.int64)
-    span = np.floor(hi / cell).astype(np.int64) - c0 + 1
-    n_cells = span[:, 0] * span[:, 1]
-    owner = np.repeat(np.arange(len(lo)), n_cells)
-    local = np.arange(int(n_cells.sum())) - np.repeat(np.cumsum(n_cells) - n_cells, n_cells)
-    sx = np.repeat(span[:, 0], n_cells)
-    dx, dy = local % sx, local // sx  # the entry's cell past its box's lowest
-    cxy = np.take(c0 - c0.min(axis=0), owner, axis=0)
-    cxy[:, 0] += dx
-    cxy[:, 1] += dy
-    key = z_order(cxy.astype(np.uint64)).astype(np.int64)
+    key, owner, flag = _entries(lo, hi, np.float32(cell))
     order = lexsort_ints((band[owner], key))  # stable, and owner rises already: then by box
     owner = owner[order]
-    flag = ((dx[order] == 0) | ((dy[order] == 0) << 1)).astype(np.uint8)
-    return key[order], owner, np.take(np.concatenate([lo, hi], axis=1), owner, axis=0), band[owner], flag
+    return key[order], owner, np.take(np.concatenate([lo, hi], axis=1), owner, axis=0), band[owner], flag[order]
+
+
+@numba.njit(cache=True, nogil=True)
+def _entries(lo, hi, cell):
+    """_cell_lists' entries by box: (cell key, box, flag) for each cell each box covers."""
+    n = len(lo)
+    c0 = np.empty((n, 2), np.int64)
+    c1 = np.empty((n, 2), np.int64)
+    total = 0
+    for a in range(n):
+        for ax in range(2):
+            c0[a, ax] = np.int64(np.floor(lo[a, ax] / cell))
+            c1[a, ax] = np.int64(np.floor(hi[a, ax] / cell))
+        total += (c1[a, 0] - c0[a, 0] + 1) * (c1[a, 1] - c0[a, 1] + 1)
+    x0, y0 = c0[:, 0].min(), c0[:, 1].min()
+    key = np.empty(total, np.int64)
+    owner = np.empty(total, np.int64)
+    flag = np.empty(total, np.uint8)
+    e = 0
+    for a in range(n):
+        for cy in range(c0[a, 1], c1[a, 1] + 1):
+            for cx in range(c0[a, 0], c1[a, 0] + 1):
+                key[e] = np.int64(_spread(np.uint64(cx - x0)) | (_spread(np.uint64(cy - y0)) << np.uint64(1)))
+                owner[e] = a
+                flag[e] = (cx == c0[a, 0]) | ((cy == c0[a, 1]) << 1)
+                e += 1
+    return key, owner, flag
 
 
 @numba.njit(cache=True, nogil=True)
@@ -316,12 +332,14 @@ def z_order(cells: np.ndarray) -> np.ndarray:
     return _spread(cells[:, 0]) | (_spread(cells[:, 1]) << np.uint64(1))
 
 
-def _spread(v: np.ndarray) -> np.ndarray:
-    """The bits of v (< 2^32, uint64) moved to the even bit positions."""
-    for shift, mask in ((16, 0x0000FFFF0000FFFF), (8, 0x00FF00FF00FF00FF), (4, 0x0F0F0F0F0F0F0F0F),
-                        (2, 0x3333333333333333), (1, 0x5555555555555555)):
-        v = (v | (v << np.uint64(shift))) & np.uint64(mask)
-    return v
+@numba.njit(cache=True, nogil=True)
+def _spread(v):
+    """The bits of v (< 2^32, uint64, a scalar or an array) moved to the even bit positions."""
+    v = (v | (v << np.uint64(16))) & np.uint64(0x0000FFFF0000FFFF)
+    v = (v | (v << np.uint64(8))) & np.uint64(0x00FF00FF00FF00FF)
+    v = (v | (v << np.uint64(4))) & np.uint64(0x0F0F0F0F0F0F0F0F)
+    v = (v | (v << np.uint64(2))) & np.uint64(0x3333333333333333)
+    return (v | (v << np.uint64(1))) & np.uint64(0x5555555555555555)
 
 
 def block_frames(xy_paths: np.ndarray, corners: np.ndarray | None = None) -> int:
