@@ -327,14 +327,18 @@ def screen_order(first: np.ndarray) -> np.ndarray:
     return np.lexsort((z_order(cells), ~ok))
 
 
-def z_order(cells: np.ndarray) -> np.ndarray:
+@numba.njit(cache=True, nogil=True)
+def z_order(cells):
     """The place of cells (N, 2) (uint64, each < 2^32) along a Z-order curve (uint64): their bits interleaved."""
-    return _spread(cells[:, 0]) | (_spread(cells[:, 1]) << np.uint64(1))
+    out = np.empty(len(cells), np.uint64)
+    for i in range(len(cells)):
+        out[i] = _spread(cells[i, 0]) | (_spread(cells[i, 1]) << np.uint64(1))
+    return out
 
 
 @numba.njit(cache=True, nogil=True)
 def _spread(v):
-    """The bits of v (< 2^32, uint64, a scalar or an array) moved to the even bit positions."""
+    """The bits of v (< 2^32, uint64) moved to the even bit positions."""
     v = (v | (v << np.uint64(16))) & np.uint64(0x0000FFFF0000FFFF)
     v = (v | (v << np.uint64(8))) & np.uint64(0x00FF00FF00FF00FF)
     v = (v | (v << np.uint64(4))) & np.uint64(0x0F0F0F0F0F0F0F0F)
