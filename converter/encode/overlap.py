@@ -147,7 +147,7 @@ def _entries(lo, hi, cell):
     for a in range(n):
         for cy in range(c0[a, 1], c1[a, 1] + 1):
             for cx in range(c0[a, 0], c1[a, 0] + 1):
-                key[e] = np.int64(_spread(np.uint64(cx - x0)) | (_spread(np.uint64(cy - y0)) << np.uint64(1)))
+                key[e] = np.int64(_z(np.uint64(cx - x0), np.uint64(cy - y0)))
                 owner[e] = a
                 flag[e] = (cx == c0[a, 0]) | ((cy == c0[a, 1]) << 1)
                 e += 1
@@ -177,7 +177,8 @@ def _candidates(key, owner, box, band, flag, idx, table, shift, nb, room):
             while g1 < stop and band[g1] == band[g0]:
                 g1 += 1
             for i in range(g0, g1):
-                # The box test over the cell's later bands first, without branches (the compiler vectorises it).
+                # The box tests against the cell's later bands first, branch-free (a loop the compiler can vectorise),
+                # then the look-ups for those that pass.
                 x0, y0, x1, y1, fi = box[i, 0], box[i, 1], box[i, 2], box[i, 3], flag[i]
                 for j in range(g1, stop):
                     near[j - g1] = ((max(x0, box[j, 0]) <= min(x1, box[j, 2]))
@@ -332,8 +333,14 @@ def z_order(cells):
     """The place of cells (N, 2) (uint64, each < 2^32) along a Z-order curve (uint64): their bits interleaved."""
     out = np.empty(len(cells), np.uint64)
     for i in range(len(cells)):
-        out[i] = _spread(cells[i, 0]) | (_spread(cells[i, 1]) << np.uint64(1))
+        out[i] = _z(cells[i, 0], cells[i, 1])
     return out
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _z(x, y):
+    """The place of cell (x, y) (uint64, each < 2^32) along the Z-order curve."""
+    return _spread(x) | (_spread(y) << np.uint64(1))
 
 
 @numba.njit(cache=True, nogil=True)
