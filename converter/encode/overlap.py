@@ -353,12 +353,20 @@ def _spread(v):
     return (v | (v << np.uint64(1))) & np.uint64(0x5555555555555555)
 
 
+def _frame_triangles(xy: np.ndarray, corners: np.ndarray | None, k: int) -> np.ndarray:
+    """Frame k's triangles (P, 3, 2) of overlap_pairs' tracks: xy[k] itself, or without a copy of xy, its
+    vertices xy[k] (V, 2) gathered by corners (P, 3)."""
+    return np.take(xy[k], corners, axis=0) if corners is not None else xy[k]
+
+
 def block_frames(xy_paths: np.ndarray, corners: np.ndarray | None = None) -> int:
     """Frames per candidate-search block for overlap_pairs' tracks: the median triangle's size (largest side of its
     box at frame 0) over the median distance a point moves in a frame (largest axis), within BLOCK_RANGE."""
     head = xy_paths[:MOTION_FRAMES + 1]
-    first = np.take(head[0], corners, axis=0) if corners is not None else head[0]  # (P, 3, 2)
-    if not first.size or len(head) < 2:
+    if len(head) < 2:
+        return BLOCK_RANGE[0]
+    first = _frame_triangles(head, corners, 0)
+    if not first.size:
         return BLOCK_RANGE[0]
     size = float(np.median((first.max(axis=1) - first.min(axis=1)).max(axis=1)))
     step = float(np.median(np.abs(np.diff(head, axis=0)).max(axis=-1)))
@@ -389,8 +397,7 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = 
     m32 = np.float32(margin)
     # Paths numbered along the screen (number i is path order[i]): a cell's paths and their pairs' PairSet tiles
     # are then near in memory.
-    first = (np.take(xy32[0], corners, axis=0) if corners is not None else xy32[0]).mean(axis=1) if t else None
-    order = screen_order(first) if t else np.arange(p)
+    order = screen_order(_frame_triangles(xy32, corners, 0).mean(axis=1)) if t else np.arange(p)
     band = band[order] if band is not None else None
     found = PairSet(p)
     for k0 in range(0, t, block):

@@ -350,3 +350,12 @@ def test_motion_clusters_peak_memory_follows_the_tracks():
         tracemalloc.stop()
     assert len(np.unique(label)) == groups.HEAD_CLUSTERS
     assert peak < 4 * xy.nbytes
+
+
+def test_overlap_pairs_of_no_frames_or_one_path_are_none():
+    corners = np.array([[0, 1, 2], [1, 2, 3], [2, 3, 4]])
+    xy = np.zeros((0, 5, 2), np.float32)
+    assert overlap.overlap_pairs(xy, np.zeros((0, 3), bool), corners=corners).shape == (0, 2)
+    assert overlap.overlap_pairs(np.zeros((3, 1, 3, 2)), np.ones((3, 1), bool)).shape == (0, 2)
+    one = np.array([[0.0, 0.0], [4.0, 0.0], [0.0, 4.0], [4.0, 4.0], [8.0, 0.0]], np.float32)[None].repeat(2, 0)
+    assert overlap.overlap_pairs(one, np.ones((2, 3), bool), corners=corners).tolist() == [[0, 1], [0, 2], [1, 2]]
