@@ -1,14 +1,19 @@
 """The occlusion pass: which triangles are ever seen, from one small integer-id render per frame.
 
 One EGL context (converter.egl, Mesa), one program, one framebuffer (an R32UI id renderbuffer and a
-depth renderbuffer, no multisampling) and one vertex buffer are made once and reused for every frame; a frame
-costs one glBufferSubData of the clip-space vertices, one draw and one glReadPixels of the ids (the depth is
-never read back). A compiled loop marks the ids' faces.
+depth renderbuffer, no multisampling), one vertex and one element buffer are made once and reused for every
+frame; a frame costs a glBufferSubData of the clip-space vertices and one of the triangles it draws, one draw
+and one glReadPixels of the ids (the depth is never read back). A compiled loop marks the ids' faces.
+
+A frame draws only the triangles the SVG draws in it (front-facing, in the view: converter.extract.cull), as
+the writers hide the others there: a triangle culled in a frame hides nothing in it (one with a corner behind
+the eye would otherwise hide what is behind its near part). Fewer triangles also make a cheaper draw: on the
+ICT head, 31k of 51k triangles a frame, the pass takes about 8 % less CPU.
 
 The rule (issue 15.8), in two parts:
 
 1. Pixel centres. A triangle that is front-facing and owns a pixel centre at the working resolution in some
-   frame (nearest front face there, GL's rasterisation rule without multisampling) is kept, however small.
+   frame (nearest drawn face there, GL's rasterisation rule without multisampling) is kept, however small.
    Ids are exact integers, so no blend of two ids can stand for a third triangle or hide a small one.
 2. Sub-pixel triangles. A front-facing, in-frustum triangle whose inscribed circle is narrower than a pixel
    diagonal (inradius < sqrt(2)/2 px, the only triangles that can miss every pixel centre) and that owns no
@@ -67,7 +72,7 @@ def _gl():
 
 
 class IdRenderer:
-    """A reusable id render target: render(clip) -> (H, W) uint32 ids, 0 = background, face f = f + 1."""
+    """A reusable id render target: render(clip, drawn) -> (H, W) uint32 ids, 0 = background, face f = f + 1."""
 
     def __init__(self, width: int, height: int, faces: np.ndarray, n_vertices: int):
         # Rasterised on this thread: a frame is small, and llvmpipe's helper threads cost ~20 % more CPU for the
@@ -77,7 +82,8 @@ class IdRenderer:
         self.n_indices = int(faces.size)
         with render_errors(self.close):
             self.gl = _gl()
-            self._build(np.ascontiguousarray(faces, np.uint32))
+            self.faces = np.ascontiguousarray(faces, np.uint32)
+            self._build(self.faces)
 
     def _build(self, faces: np.ndarray) -> None:
         gl = self.gl
@@ -103,7 +109,8 @@ class IdRenderer:
         gl.glVertexAttribPointer(0, 4, gl.GL_FLOAT, gl.GL_FALSE, 16, ctypes.c_void_p(0))
         self.ebo = gl.glGenBuffers(1)
         gl.glBindBuffer(gl.GL_ELEMENT_ARRAY_BUFFER, self.ebo)
-        gl.glBufferData(gl.GL_ELEMENT_ARRAY_BUFFER, faces.nbytes, faces, gl.GL_STATIC_DRAW)
+        gl.glBufferData(gl.GL_ELEMENT_ARRAY_BUFFER, faces.nbytes, faces, gl.GL_DYNAMIC_DRAW)
+        self._drawn: np.ndarray | None = None  # the faces the element buffer holds (None: all, in order)
         self.fbo = gl.glGenFramebuffers(1)
         gl.glBindFramebuffer(gl.GL_FRAMEBUFFER, self.fbo)
         self.rbo = gl.glGenRenderbuffers(2)
@@ -126,15 +133,35 @@ class IdRenderer:
         gl.glUseProgram(self.program)
         self._clear_ids = np.zeros(4, np.uint32)
 
-    def render(self, clip: np.ndarray) -> np.ndarray:
-        """(H, W) uint32 ids of one frame, row 0 at the top; clip is (V, 4) clip-space positions."""
+    def render(self, clip: np.ndarray, drawn: np.ndarray | None = None) -> np.ndarray:
+        """(H, W) uint32 ids of one frame, row 0 at the top; clip is (V, 4) clip-space positions. drawn: the faces
+        to draw (ascending ids; default all); the others hide nothing."""
         gl = self.gl
         gl.glBufferSubData(gl.GL_ARRAY_BUFFER, 0, np.ascontiguousarray(clip, np.float32))
+        n = self._use(drawn)
         gl.glClearBufferuiv(gl.GL_COLOR, 0, self._clear_ids)
         gl.glClearBufferfv(gl.GL_DEPTH, 0, np.ones(1, np.float32))
-        gl.glDrawElements(gl.GL_TRIANGLES, self.n_indices, gl.GL_UNSIGNED_INT, ctypes.c_void_p(0))
+        gl.glDrawElements(gl.GL_TRIANGLES, 3 * n, gl.GL_UNSIGNED_INT, ctypes.c_void_p(0))
         ids = gl.glReadPixels(0, 0, self.width, self.height, gl.GL_RED_INTEGER, gl.GL_UNSIGNED_INT)
-        return np.frombuffer(ids, np.uint32).reshape(self.height, self.width)[::-1]
+        ids = np.frombuffer(ids, np.uint32).reshape(self.height, self.width)[::-1]
+        if self._drawn is None:
+            return ids
+        out = np.empty(ids.shape, np.uint32)
+        _face_ids(ids, self._drawn, out)  # the draw's primitive numbers -> face ids
+        return out
+
+    def _use(self, drawn: np.ndarray | None) -> int:
+        """Put the faces drawn (None: all) into the element buffer; their count."""
+        gl = self.gl
+        if drawn is None:
+            if self._drawn is not None:
+                gl.glBufferSubData(gl.GL_ELEMENT_ARRAY_BUFFER, 0, self.faces)
+                self._drawn = None
+            return len(self.faces)
+        self._drawn = np.asarray(drawn, np.int64)
+        if len(self._drawn):
+            gl.glBufferSubData(gl.GL_ELEMENT_ARRAY_BUFFER, 0, np.take(self.faces, self._drawn, axis=0))
+        return len(self._drawn)
 
     def close(self) -> None:
         """Free the GL objects and the context."""
@@ -169,7 +196,7 @@ def _ever_seen(frames: np.ndarray, faces: np.ndarray, camera: Camera, visible: n
     with IdRenderer(camera.width, camera.height, faces, frames.shape[1]) as r:
         for k in range(t):
             clip = clip_coords(camera, frames[k])
-            ids = r.render(clip)
+            ids = r.render(clip, np.flatnonzero(visible[k]))
             _mark(ids, visible[k], kept)
             if np.any(visible[k] > kept):  # a front-facing triangle owns no pixel centre yet: rule 2
                 w = clip[:, 3].astype(np.float64)
@@ -180,6 +207,16 @@ def _ever_seen(frames: np.ndarray, faces: np.ndarray, camera: Camera, visible: n
             if progress:
                 progress((k + 1) / t)
     return kept
+
+
+@numba.njit(cache=True, nogil=True)
+def _face_ids(ids, drawn, out):
+    """out = the face id (f + 1, 0 the background) of each of ids (H, W), a draw's primitive numbers + 1 over the
+    faces drawn."""
+    for i in range(ids.shape[0]):
+        for j in range(ids.shape[1]):
+            v = ids[i, j]
+            out[i, j] = drawn[v - 1] + 1 if v > 0 else 0
 
 
 @numba.njit(cache=True, nogil=True)

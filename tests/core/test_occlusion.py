@@ -10,7 +10,7 @@ import pytest
 
 from conftest import SAMPLE
 from converter import idpass
-from converter.camera import Camera, look_at, orthographic
+from converter.camera import Camera, frustum, look_at, orthographic
 from converter.errors import RenderError
 from converter.extract import cull
 
@@ -86,6 +86,27 @@ def test_back_facing_and_off_screen_triangles_hide_nothing_and_are_not_kept():
     assert _kept([BIG, back]).tolist() == [True, False]
     far_off = _tri((200, 200), (260, 200), (200, 260), 0.5)
     assert _kept([BIG, far_off]).tolist() == [True, False]
+
+
+def test_a_triangle_the_frame_does_not_draw_hides_nothing():
+    # Perspective, eye at z = 5: a big triangle with one corner behind the eye is culled (the SVG never draws it),
+    # though GL would draw its part in front of the near plane over the small one, which must stay.
+    cam = Camera(look_at(np.array([0.0, 0, 5]), np.zeros(3), np.array([0.0, 1, 0])),
+                 frustum(-0.1, 0.1, -0.1, 0.1, 0.2, 20.0), SIZE, SIZE, False)
+    small = [[-0.3, -0.3, 0.0], [0.3, -0.3, 0.0], [0.0, 0.3, 0.0]]
+    cover = [[-2.0, -2.0, 3.0], [2.0, -2.0, 3.0], [0.0, 3.0, 6.0]]  # the last corner behind the eye
+    verts = np.array([small, cover], np.float32).reshape(1, 6, 3)
+    faces = np.arange(6, dtype=np.int32).reshape(2, 3)
+    xy, z, w = cam.project(verts)
+    vis = cull(xy, z, w, faces, SIZE, SIZE)
+    assert vis.tolist() == [[True, False]]
+    with idpass.IdRenderer(SIZE, SIZE, faces, 6) as r:  # drawn whole, GL hides the small one behind the cover
+        everything = r.render(idpass.clip_coords(cam, verts[0]))
+        assert (everything == 2).any() and not (everything == 1).any()
+        only_drawn = r.render(idpass.clip_coords(cam, verts[0]), np.array([0]))
+        assert (only_drawn == 1).any() and set(np.unique(only_drawn)) <= {0, 1}
+        assert np.array_equal(r.render(idpass.clip_coords(cam, verts[0])), everything)  # all faces again
+    assert idpass.ever_seen(verts, faces, cam, vis).tolist() == [True, False]
 
 
 def test_a_triangle_seen_in_any_frame_is_kept():
@@ -203,21 +224,23 @@ def test_the_id_pass_asks_llvmpipe_for_no_raster_threads_unless_the_environment_
 def _reference_ever_seen(frames, faces, camera, visible):
     kept = np.zeros(faces.shape[0], bool)
     faces64 = faces.astype(np.int64)
-    with idpass.IdRenderer(camera.width, camera.height, faces, frames.shape[1]) as r:
-        for k in range(frames.shape[0]):
-            clip = idpass.clip_coords(camera, frames[k])
+    for k in range(frames.shape[0]):
+        clip = idpass.clip_coords(camera, frames[k])
+        drawn = np.flatnonzero(visible[k])  # only what the SVG draws in the frame can hide: a mesh of just those
+        with idpass.IdRenderer(camera.width, camera.height, faces[drawn], frames.shape[1]) as r:
             ids = r.render(clip)
-            shown = np.zeros(faces.shape[0] + 1, bool)
-            shown[ids.ravel().astype(np.intp)] = True
-            kept |= shown[1:] & visible[k]
-            cand = np.flatnonzero(visible[k] & ~kept)
-            if cand.size:
-                w = clip[:, 3].astype(np.float64)
-                xy = np.empty((clip.shape[0], 2))
-                xy[:, 0] = (clip[:, 0] / w + 1) * 0.5 * camera.width
-                xy[:, 1] = (1 - clip[:, 1] / w) * 0.5 * camera.height
-                cand = cand[_inradius(xy, faces64[cand]) < idpass.INRADIUS_PX]
-                kept[cand] = _subpixel_kept(ids, xy, clip[:, 2] / w, faces64, cand)
+        ids = np.where(ids > 0, drawn[ids.astype(np.intp) - 1] + 1, 0)
+        shown = np.zeros(faces.shape[0] + 1, bool)
+        shown[ids.ravel().astype(np.intp)] = True
+        kept |= shown[1:] & visible[k]
+        cand = np.flatnonzero(visible[k] & ~kept)
+        if cand.size:
+            w = clip[:, 3].astype(np.float64)
+            xy = np.empty((clip.shape[0], 2))
+            xy[:, 0] = (clip[:, 0] / w + 1) * 0.5 * camera.width
+            xy[:, 1] = (1 - clip[:, 1] / w) * 0.5 * camera.height
+            cand = cand[_inradius(xy, faces64[cand]) < idpass.INRADIUS_PX]
+            kept[cand] = _subpixel_kept(ids, xy, clip[:, 2] / w, faces64, cand)
     return kept
 
 
