@@ -71,10 +71,12 @@ def greedy_order(key: np.ndarray, pairs: np.ndarray, switch: Callable[[dict[int,
     draws runs of one key: the current key goes on while one of its paths is free (the lowest index first),
     then switch(free) names the next key (free: key -> heap of its free paths, some empty)."""
     p = len(key)
-    code = unique_ints(np.asarray(pairs, np.int64).reshape(-1, 2) @ np.array([p, 1]))
-    pairs = np.column_stack([code // p, code % p])
-    succ = sparse.csr_matrix((np.ones(len(pairs), bool), (pairs[:, 0], pairs[:, 1])), shape=(p, p))
-    indeg = np.bincount(pairs[:, 1], minlength=p) if len(pairs) else np.zeros(p, np.int64)
+    pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+    code = unique_ints(pairs[:, 0] * p + pairs[:, 1])
+    first = code // p
+    second = code - first * p
+    succ = sparse.csr_matrix((np.ones(len(code), bool), (first, second)), shape=(p, p))
+    indeg = np.bincount(second, minlength=p) if len(code) else np.zeros(p, np.int64)
     free: dict[int, list[int]] = {}
     for i in np.flatnonzero(indeg == 0).tolist():
         heapq.heappush(free.setdefault(int(key[i]), []), i)

@@ -423,4 +423,7 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = 
     a, b = found.pairs()
     a, b = order[a], order[b]
     code = np.sort(np.minimum(a, b) * p + np.maximum(a, b))
-    return np.column_stack([code // p, code % p])
+    out = np.empty((len(code), 2), np.int64)
+    np.floor_divide(code, p, out=out[:, 0])
+    np.subtract(code, out[:, 0] * p, out=out[:, 1])
+    return out
