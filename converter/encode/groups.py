@@ -425,7 +425,7 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
     in_head = in_head.astype(np.float32)
     order = np.arange(len(tris))
     if merge_runs and len(tris) > 1:
-        order = reorder(band, overlap_pairs(xy, active, band=band, corners=faces[tris]))
+        order = reorder(band, overlap_pairs(xy, active, band=band, corners=faces[tris], drift=head.matrices[:, :, 2]))
     band = band[order]
     gains = np.zeros(len(band_ids))
     for b, m in enumerate(motions):

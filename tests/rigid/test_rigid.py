@@ -273,6 +273,27 @@ def test_overlap_pairs_match_every_pair_tested_by_brute_force(monkeypatch, grows
     assert {tuple(e) for e in shared.tolist()} == want
 
 
+def test_overlap_pairs_with_a_drift_taken_off_are_the_same_pairs():
+    # A head's translation per frame taken off before the candidate search moves every box of a frame alike: the
+    # same pairs, whatever the drift (the true one, a wrong one, a huge one), also far from the origin where the
+    # float32 differences round (the boxes grow by that rounding).
+    rng = np.random.default_rng(12)
+    t, p = 24, 80
+    walk = 3000.0 + np.cumsum(rng.normal(0, 4.0, (t, 2)), axis=0)  # a fast head, far out: float32 ulp ~ 2e-4 px
+    centre = rng.uniform(0, 45, (1, p, 1, 2)) + np.cumsum(rng.normal(0, 0.3, (t, p, 1, 2)), axis=0)
+    xy = (walk[:, None, None] + centre + rng.uniform(-4, 4, (1, p, 3, 2))).astype(np.float32)
+    active = rng.random((t, p)) > 0.2
+    band = rng.integers(0, 3, p)
+    verts, corners = xy.reshape(t, p * 3, 2), np.arange(p * 3).reshape(p, 3)
+    plain = overlap.overlap_pairs(verts, active, margin=0.5, band=band, corners=corners)
+    assert len(plain) > 50
+    for drift in (walk, walk + rng.normal(0, 3.0, (t, 2)), np.full((t, 2), -1e6)):
+        got = overlap.overlap_pairs(verts, active, margin=0.5, band=band, corners=corners, drift=drift)
+        assert np.array_equal(got, plain)
+    # The translation taken off, the paths barely move: blocks of more frames find them.
+    assert overlap.block_frames(verts, corners, walk) > overlap.block_frames(verts, corners) == 2
+
+
 def test_overlap_blocks_follow_how_far_a_triangle_moves_for_its_size():
     # 6 px triangles moving 0.5 px a frame: a block of 12 frames; ten times the speed: 2 (the least); still: 32.
     rng = np.random.default_rng(2)
@@ -282,6 +303,8 @@ def test_overlap_blocks_follow_how_far_a_triangle_moves_for_its_size():
         assert overlap.block_frames(xy) == want
         verts = xy.reshape(30, -1, 2)  # the same as vertex ids into a shared array
         assert overlap.block_frames(verts, np.arange(120).reshape(40, 3)) == want
+    moving = tri[None] + 5.0 * np.arange(30)[:, None, None, None] * np.array([1.0, 0.0])
+    assert overlap.block_frames(moving, drift=5.0 * np.arange(30)[:, None] * np.array([1.0, 0.0])) == 32
     assert overlap.block_frames(np.full((5, 3, 3, 2), np.nan)) == 32
     assert overlap.block_frames(np.zeros((1, 0, 3, 2))) == 2
 
