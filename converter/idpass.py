@@ -238,6 +238,7 @@ def _subpixel(ids, xy, z, faces, visible, kept):
     points. ids (H, W) as IdRenderer.render gives them; xy (V, 2) pixels with y down and z (V,) NDC depth of the
     same frame. Compiled: as numpy over each frame's few candidates it cost 0.4 ms a frame in call overhead. The
     arithmetic is numpy's, operation for operation (tests/core/test_occlusion.py keeps that version)."""
+    owner = np.empty(3)
     for f in range(len(kept)):
         if kept[f] or not visible[f]:
             continue
@@ -251,13 +252,14 @@ def _subpixel(ids, xy, z, faces, visible, kept):
         cx = (xy[i0, 0] + xy[i1, 0] + xy[i2, 0]) / 3
         cy = (xy[i0, 1] + xy[i1, 1] + xy[i2, 1]) / 3
         gx, gy = _slope(xy, z, i0, i1, i2)
+        owner[0] = -1  # the owner whose slope owner[1:] holds: a sub-pixel triangle's probes mostly share one
         for probe in range(4):
             if probe == 0:
                 px, py = cx, cy
             else:
                 v = faces[f, probe - 1]
                 px, py = PROBE_IN * cx + (1 - PROBE_IN) * xy[v, 0], PROBE_IN * cy + (1 - PROBE_IN) * xy[v, 1]
-            if _in_front(ids, xy, z, faces, px, py, z[i0], xy[i0, 0], xy[i0, 1], gx, gy):
+            if _in_front(ids, xy, z, faces, px, py, z[i0], xy[i0, 0], xy[i0, 1], gx, gy, owner):
                 kept[f] = True
                 break
 
@@ -274,8 +276,9 @@ def _slope(xy, z, i0, i1, i2):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _in_front(ids, xy, z, faces, px, py, z0, x0, y0, gx, gy) -> bool:
-    """The plane (depth z0 at (x0, y0), slope (gx, gy)) is not behind the owner of the pixel holding (px, py)."""
+def _in_front(ids, xy, z, faces, px, py, z0, x0, y0, gx, gy, cache) -> bool:
+    """The plane (depth z0 at (x0, y0), slope (gx, gy)) is not behind the owner of the pixel holding (px, py).
+    cache (3,): the last owner met and its slope, reused when the pixel has the same owner."""
     h, w = ids.shape
     col = min(max(np.int64(np.floor(px)), 0), w - 1)
     row = min(max(np.int64(np.floor(py)), 0), h - 1)
@@ -283,7 +286,10 @@ def _in_front(ids, xy, z, faces, px, py, z0, x0, y0, gx, gy) -> bool:
     if owner < 0:
         return True
     o0, o1, o2 = faces[owner, 0], faces[owner, 1], faces[owner, 2]
-    ox, oy = _slope(xy, z, o0, o1, o2)
+    if cache[0] != owner:
+        cache[1], cache[2] = _slope(xy, z, o0, o1, o2)
+        cache[0] = owner
+    ox, oy = cache[1], cache[2]
     z_t = z0 + ((px - x0) * gx + (py - y0) * gy)
     z_o = z[o0] + ((px - xy[o0, 0]) * ox + (py - xy[o0, 1]) * oy)
     reach = np.hypot(px - col - 0.5, py - row - 0.5)
