@@ -8,8 +8,10 @@ import numpy as np
 def unique_ints(x: np.ndarray) -> np.ndarray:
     """np.unique of integers x (sorted distinct values, flattened) by one sort. Since numpy 2.3 np.unique finds the
     distinct values with a hash table, which on millions of distinct int64 is 50-300x slower than sorting: the
-    drawing-order pairs of the 128k-triangle bench face (11 M codes) took 11.5 s, a sort 0.2 s."""
-    s = np.sort(np.asarray(x).ravel())
+    drawing-order pairs of the 128k-triangle bench face (11 M codes) took 11.5 s, a sort 0.2 s. The sort is numpy's
+    stable one: as fast on shuffled integers, and linear on a few sorted runs (those pairs arrive sorted, with
+    each band's chain after them: 1.0 s -> 0.04 s)."""
+    s = np.sort(np.asarray(x).ravel(), kind="stable")
     if not len(s):
         return s
     keep = np.empty(len(s), bool)
