@@ -10,7 +10,10 @@ A forked child shares its parent's pages until either writes them, so the two pe
 pages would count twice) nor does the larger bound the machine's use (the child's own pages come on top of the
 parent's). The sum of the tree's proportional set sizes (PSS: each shared page split between its sharers) is what
 the machine holds; TreePss samples it from outside the measured processes, every 20 ms, so it misses spikes
-shorter than that.
+shorter than that. Reading a process's PSS walks its whole page table under its memory-map lock, so run_measured
+samples only while the process has children: a lone process's peak is its own ru_maxrss, exact and free. (Sampling
+throughout took the bench parent a third of a core on a 2-core machine, against a 2-9 GB conversion whose page
+faults waited on that lock.)
 """
 
 from __future__ import annotations
@@ -62,16 +65,18 @@ def tree_pss_kb(pid: int) -> int:
 
 
 class TreePss:
-    """A sampler thread: the peak over time of tree_pss_kb(pid), as peak_mb, while the with-block runs."""
+    """A sampler thread: the peak over time of tree_pss_kb(pid), as peak_mb, while the with-block runs; with
+    forked_only, only at the times pid has descendants (the caller takes the lone process's ru_maxrss)."""
 
-    def __init__(self, pid: int, interval: float = 0.02) -> None:
-        self.pid, self.interval, self.peak_kb = pid, interval, 0
+    def __init__(self, pid: int, interval: float = 0.02, forked_only: bool = False) -> None:
+        self.pid, self.interval, self.forked_only, self.peak_kb = pid, interval, forked_only, 0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._sample, daemon=True)
 
     def _sample(self) -> None:
         while not self._stop.is_set():
-            self.peak_kb = max(self.peak_kb, tree_pss_kb(self.pid))
+            if not self.forked_only or len(_tree(self.pid)) > 1:
+                self.peak_kb = max(self.peak_kb, tree_pss_kb(self.pid))
             self._stop.wait(self.interval)
 
     def __enter__(self) -> TreePss:
@@ -90,9 +95,10 @@ class TreePss:
 
 def run_measured(cmd: list[str], **kwargs) -> tuple[subprocess.CompletedProcess, float]:
     """subprocess.run(cmd, capture_output=True, text=True, **kwargs), raising on a non-zero exit, while sampling
-    the PSS of its process tree: (the completed process, peak MiB of the sum)."""
+    the PSS of its process tree whenever the process has children: (the completed process, peak MiB of the sum;
+    the caller adds the process's own peak RSS, which cmd reports)."""
     with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs) as proc:
-        with TreePss(proc.pid) as tree:
+        with TreePss(proc.pid, forked_only=True) as tree:
             out, err = proc.communicate()
     if proc.returncode:
         raise subprocess.CalledProcessError(proc.returncode, cmd, out, err)
