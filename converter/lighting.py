@@ -60,7 +60,7 @@ def lambert(
 ) -> np.ndarray:
     """Display colour of display base_rgb lit in linear light: srgb(linear(base) * (ambient + diffuse * n.l+))."""
     light = light_direction_world(view, lighting).astype(np.float32)
-    gain = np.asarray(normals, np.float32) @ light
+    gain = np.asarray(np.asarray(normals, np.float32) @ light)  # an array even for one normal
     np.maximum(gain, 0.0, out=gain)  # n.l+, NaN kept (np.clip's semantics)
     gain *= lighting.diffuse
     gain += lighting.ambient

@@ -413,7 +413,9 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = 
         drift = np.asarray(drift, np.float64)
         # The float32 difference is rounded (half an ulp of the result, plus the drift's own rounding): the boxes
         # grow by that much more, so a pair within margin on screen still has meeting boxes.
-        reach = float(np.nanmax(np.abs(xy32))) + float(np.abs(drift).max())
+        # fmax/fmin skip NaN (unset vertices) with no temporary of the tracks' size
+        span = (float(np.fmax.reduce(xy32, axis=None)), -float(np.fmin.reduce(xy32, axis=None))) if xy32.size else (0,)
+        reach = max(span) + float(np.abs(drift).max())
         if np.isfinite(reach):
             grow = np.float32(margin / 2 + 4 * np.finfo(np.float32).eps * reach)
         else:  # positions or drift not finite: searched on screen
