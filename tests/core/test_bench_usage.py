@@ -20,6 +20,7 @@ FORKS = textwrap.dedent("""
     os.waitpid(pid, 0)
 """)
 ALONE = "import time; own = bytearray(60 << 20); time.sleep(0.8)"
+WAIT_S = 10.0  # the longest a loaded machine may take to start a Python and touch 60 MB
 
 
 def test_tree_sampler_counts_a_forked_child_on_top_of_its_parent():
@@ -34,6 +35,8 @@ def test_tree_sampler_reads_nothing_while_the_process_is_alone():
     # ... where a sampler asked to sample throughout sees its 60 MB.
     with subprocess.Popen([sys.executable, "-c", ALONE]) as proc:
         with usage.TreePss(proc.pid) as tree:
-            time.sleep(0.6)
+            deadline = time.monotonic() + WAIT_S
+            while tree.peak_mb <= 60 and proc.poll() is None and time.monotonic() < deadline:
+                time.sleep(0.02)
         proc.wait()
     assert tree.peak_mb > 60
