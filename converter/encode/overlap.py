@@ -155,15 +155,17 @@ def _entries(lo, hi, cell):
 
 
 @numba.njit(cache=True, nogil=True)
-def _candidates(key, owner, box, band, flag, idx, table, shift, nb, room):
-    """Pairs (a < b) (M, 2) of boxes of different band that meet and whose paths (idx[a], idx[b]) are not yet in
-    the PairSet table (room: a first guess at M), from the entries of _cell_lists: a cell's boxes of one band are
+def _candidates(key, owner, box, band, flag, idx, table, shift, nb, out):
+    """Pairs (a < b) of boxes of different band that meet and whose paths (idx[a], idx[b]) are not yet in the
+    PairSet table, as (buffer, M): the pairs are buffer[:M], buffer being out (K, 2) or, when more than K pairs
+    come, a larger one (passed again to the next block, so a block's pairs fill pages already touched: growing a
+    fresh buffer per block faulted in 2.5 GB over the 128k-triangle face's 67 blocks). From the entries of
+    _cell_lists: a cell's boxes of one band are
     consecutive, so only pairs across its bands are looked at, and a cell inside one band costs one pass (on the
     128k-triangle face, 43 % of the cells and half the pairs within cells: 19.7 -> 13.8 s over its 335 frames).
 
     Each pair is reported in one cell only: the cell holding the low corner of the two boxes' intersection, which
     both cover when they meet: there, in x and in y, the cell is the lowest of one of the two boxes."""
-    out = np.empty((max(room, 16), 2), np.int64)
     near = np.empty(len(key), np.bool_)
     m = 0
     start = 0
@@ -190,14 +192,14 @@ def _candidates(key, owner, box, band, flag, idx, table, shift, nb, room):
                     if _has(table, shift, nb, idx[u], idx[v]):
                         continue
                     if m == len(out):
-                        grown = np.empty((2 * m, 2), np.int64)
+                        grown = np.empty((max(2 * m, 16), 2), np.int64)
                         grown[:m] = out
                         out = grown
                     out[m, 0], out[m, 1] = u, v
                     m += 1
             g0 = g1
         start = stop
-    return out[:m]
+    return out, m
 
 
 class PairSet:
@@ -213,6 +215,7 @@ class PairSet:
 
     def __init__(self, n: int, bits: int | None = None):
         bits = PAIRSET_BITS if bits is None else bits
+        self.n = n
         self.tiles = max(1, (n + TILE - 1) // TILE)  # tiles a side
         self.table = np.full((1 << bits, 2), EMPTY, np.int64)  # (tile number, word) per slot
         self.shift = 64 - bits
@@ -239,11 +242,17 @@ class PairSet:
         self.used += used
         self.count += added
 
-    def pairs(self) -> tuple[np.ndarray, np.ndarray]:
-        """The pairs (a, b), a < b, by tile."""
-        a, b = np.empty(self.count, np.int64), np.empty(self.count, np.int64)
-        _unpack(self.table, self.tiles, a, b)
-        return a, b
+    def pairs(self, relabel: np.ndarray | None = None) -> np.ndarray:
+        """The pairs (E, 2), sorted, each path a renamed relabel[a] (a permutation of 0..n-1; default a) and each
+        pair written (smaller, larger)."""
+        relabel = np.arange(self.n, dtype=np.int64) if relabel is None else np.asarray(relabel, np.int64)
+        code = np.empty(self.count, np.int64)  # smaller * n + larger: one array sorted in place (the 11 M pairs of
+        # the 128k-triangle face took 1.2 s as separate arrays relabelled, compared and sorted)
+        _codes(self.table, self.tiles, relabel, self.n, code)
+        code.sort()
+        out = np.empty((len(code), 2), np.int64)
+        np.divmod(code, max(self.n, 1), out=(out[:, 0], out[:, 1]))
+        return out
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -303,8 +312,8 @@ def _rehash(old, table, shift) -> None:
 
 
 @numba.njit(cache=True, nogil=True)
-def _unpack(table, nb, a, b) -> None:
-    """Every pair of table into a, b."""
+def _codes(table, nb, relabel, n, out) -> None:
+    """Every pair (a, b) of table into out as min * n + max of relabel[a], relabel[b]."""
     m = 0
     for i in range(len(table)):
         tile, word = table[i, 0], table[i, 1]
@@ -312,8 +321,9 @@ def _unpack(table, nb, a, b) -> None:
             continue
         for bit in range(TILE * TILE):
             if (word >> bit) & 1:
-                a[m] = (tile // nb) * TILE + bit // TILE
-                b[m] = (tile % nb) * TILE + bit % TILE
+                a = relabel[(tile // nb) * TILE + bit // TILE]
+                b = relabel[(tile % nb) * TILE + bit % TILE]
+                out[m] = min(a, b) * n + max(a, b)
                 m += 1
 
 
@@ -425,6 +435,7 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = 
     order = screen_order(_frame_triangles(xy32, corners, 0).mean(axis=1)) if t else np.arange(p)
     band = band[order] if band is not None else None
     found = PairSet(p)
+    buffer = np.empty((p, 2), np.int64)  # _candidates' pairs, reused (and grown) block to block
     for k0 in range(0, t, block):
         act = np.take(active[k0:k0 + block], order, axis=1)
         idx = np.flatnonzero(act.any(axis=0))
@@ -441,16 +452,12 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = 
         cell = max(CELL_BOXES * float(np.median((hi - lo).max(axis=1))), 1.0)
         own_band = band[idx] if band is not None else np.arange(len(idx))  # most neighbours share a band
         # Only pairs not found in an earlier block come back, to be tested.
-        fresh = _candidates(*_cell_lists(lo, hi, cell, own_band), idx, found.table, found.shift, found.tiles, len(idx))
+        buffer, m = _candidates(*_cell_lists(lo, hi, cell, own_band), idx, found.table, found.shift, found.tiles,
+                                buffer)
+        fresh = buffer[:m]
         la, lb = fresh[:, 0], fresh[:, 1]
         meet = np.zeros(len(fresh), bool)
         if len(fresh):
             parallel.threaded(_meet, len(fresh), pts, on, la, lb, m32, meet)
         found.add(idx[la[meet]], idx[lb[meet]])
-    a, b = found.pairs()
-    a, b = order[a], order[b]
-    code = np.sort(np.minimum(a, b) * p + np.maximum(a, b))
-    out = np.empty((len(code), 2), np.int64)
-    np.floor_divide(code, p, out=out[:, 0])
-    np.subtract(code, out[:, 0] * p, out=out[:, 1])
-    return out
+    return found.pairs(order)

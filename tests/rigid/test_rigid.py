@@ -220,8 +220,10 @@ def test_pair_set_is_a_set():
         assert pairs.count == len(want) and 2 * pairs.used <= len(pairs.table)
     assert set(corner) <= want
     got = pairs.pairs()
-    assert sorted(zip(*(x.tolist() for x in got))) == sorted(want)
-    assert pairs.has(*got).all()
+    assert got.tolist() == [list(w) for w in sorted(want)]
+    assert pairs.has(got[:, 0], got[:, 1]).all()
+    perm = rng.permutation(n)  # renamed: each pair (smaller, larger) of the new names, sorted
+    assert pairs.pairs(perm).tolist() == sorted(sorted([int(perm[x]), int(perm[y])]) for x, y in want)
     absent = np.array([(x, y) for x in range(0, n, 97) for y in range(x + 1, n, 89) if (x, y) not in want])
     assert len(absent) > 1000 and not pairs.has(absent[:, 0], absent[:, 1]).any()
 
