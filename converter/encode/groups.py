@@ -117,13 +117,16 @@ class Layout(NamedTuple):
     def band_local(self, sel: np.ndarray) -> np.ndarray:
         """Paths sel's vertices (T, len(sel), 6) in their band's local px (relative to its centroid), worked out
         for the paths asked (a whole (T, P, 6) copy would double the plan's memory)."""
-        t = self.head_local.shape[0]
+        head = self.head_local
+        t = head.shape[0]
         out = np.empty((t, len(sel), 6))
         band = self.band[sel]
         for b in np.unique(band).tolist():
             at = np.flatnonzero(band == b)
-            pts = self.head_local.take(sel[at]).reshape(t, len(at), 3, 2)
-            out[:, at] = local_tracks(pts, self.motions[b].matrices).reshape(t, len(at), 6)
+            # Each vertex once (a vertex is a corner of ~6 paths), as Layout.tracks works them out
+            verts, inv = np.unique(head.corners[sel[at]], return_inverse=True)
+            pts = local_tracks(np.take(head.verts, verts, axis=1)[:, :, None, :], self.motions[b].matrices)[:, :, 0]
+            out[:, at] = np.take(pts, inv.reshape(len(at), 3), axis=1).reshape(t, len(at), 6)
         return out
 
     def tracks(self, wrapped_runs: list[tuple[int, int]]) -> Tracks:
