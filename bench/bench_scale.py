@@ -43,10 +43,11 @@ from converter.outputs import output_kind
 TITLE = "Conversion speed and memory (issue 16)"
 QUICK = os.environ.get("FACESVG_BENCH_QUICK", "") not in ("", "0")
 CAPTURE = (FRAMES, 8000, 0)  # the capture-like face (bench/capture_like.py): the headline case
-CAPTURE_RUNS = 3  # its runs (median by CPU); every other case runs once
 # (frames, generator triangles, midpoint subdivisions)
 FRAME_CASES = ((100, 8000, 0), (FRAMES, 8000, 0), (1000, 8000, 0), (3000, 8000, 0))
 TRIANGLE_CASES = ((FRAMES, 2000, 0), (FRAMES, 8000, 0), (FRAMES, 8000, 1), (FRAMES, 8000, 2))
+MEDIAN_CASES = (CAPTURE, (3000, 8000, 0), (FRAMES, 8000, 2))  # the cases with a CPU target: each mode's median
+MEDIAN_RUNS = 3  # run by CPU of this many (single runs on this shared host scatter by 10-20 %); the others run once
 QUICK_FRAMES, QUICK_TRIANGLES = 1000, 40000
 ARKIT = (4000, -1, 0)  # the ICT head (full, 50,996 triangles) driven by a 4,000-frame Live Link Face capture
 RAW_FRAMES = 1000  # --raw is measured up to this many frames (its file is ~0.35 GB at 1,000)
@@ -217,7 +218,7 @@ def run() -> str:
     floor = _median([measure(0, 0, 0, "floor") for _ in range(3)])
     res = {}
     for case in cases:
-        runs = CAPTURE_RUNS if case == CAPTURE else 1
+        runs = MEDIAN_RUNS if case in MEDIAN_CASES else 1
         res[case] = tuple(_median([measure(*case, mode) for _ in range(runs)]) for mode in ("bounded", "naive"))
         print(case, res[case], flush=True)
     rows = ["| case | triangles x frames | CPU s (convert) | of which writer | writer M tri-frames/s | peak MB | "
@@ -226,8 +227,9 @@ def run() -> str:
     for case in cases:
         b, r = res[case]
         tf = b["triangles"] * b["frames"]
-        label = (f"capture-like face (median of {CAPTURE_RUNS})" if case == CAPTURE
-                 else f"ARKit-driven ICT head x {case[0]:,}" if case == ARKIT else f"{case[1] * 4 ** case[2] // 1000}k x {case[0]}")
+        label = ("capture-like face" if case == CAPTURE else f"ARKit-driven ICT head x {case[0]:,}" if case == ARKIT
+                 else f"{case[1] * 4 ** case[2] // 1000}k x {case[0]}")
+        label += f" (median of {MEDIAN_RUNS})" if case in MEDIAN_CASES else ""
         rows.append(f"| {label} | {b['triangles']:,} x {b['frames']:,} | {b['cpu']:.1f} | {b['writer_cpu']:.1f} | "
                     f"{tf / b['writer_cpu'] / 1e6:.2f} | {b['peak_mb']:,.0f} | {b['peak_mb'] * 2 ** 20 / tf:.0f} | "
                     f"{r['cpu']:.1f} | {r['peak_mb']:,.0f} | {b['cpu'] / r['cpu']:.2f} | "
@@ -253,9 +255,10 @@ def run() -> str:
     return "\n".join([
         "Default options (flat, bounded, rigid factoring on, 512 px) against the naive writer (`naive_svg`: the same "
         "extraction, then every kept triangle's coordinates at every frame with 2 decimals, streamed). CPU is user+sys of the conversion inside a fresh child process (all "
-        "threads, plus the process the occlusion pass forks: `bench/usage.py`; the face's generation excluded), the capture-like face the median of its runs (by CPU), the other "
-        "cases one run each (the machine, 2 cores, was shared with other engineers' jobs: single runs scatter by "
-        "10-20 %). Peak MB is the larger of the child's `ru_maxrss`, its forked pass's, and the "
+        "threads, plus the process the occlusion pass forks: `bench/usage.py`; the face's generation excluded). The cases with a CPU target "
+        f"(capture-like, 8k x 3,000, 128k) are each mode's median run by CPU of {MEDIAN_RUNS} (since 2026-12-06; before, "
+        "the capture-like face's alone), the other cases one run each (the machine, 2 cores, was shared with other "
+        "engineers' jobs: single runs scatter by 10-20 %). Peak MB is the larger of the child's `ru_maxrss`, its forked pass's, and the "
         "sampled peak of the sum of their PSS (shared pages counted once, every 20 ms while the pass's child lives: "
         "`usage.TreePss`; since 2026-12-06 not while the conversion runs alone, where reading its PSS took the bench "
         "a third of a core and contended with the conversion's page faults). The child loads its face from an .npz that a process of its "
