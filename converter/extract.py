@@ -9,7 +9,7 @@ from converter import framing, idpass, render
 from converter.animation import FaceAnimation
 from converter.camera import Camera
 from converter.errors import InputError
-from converter.lighting import DEFAULT_LIGHTING, Lighting, lambert
+from converter.lighting import DEFAULT_LIGHTING, Lighting, lambert_linear, srgb_to_linear
 from converter.options import Progress, no_progress
 from converter.sheet import Sheet
 
@@ -193,11 +193,14 @@ def extract(
     vertex_colors = vertex_colors or bool(reference_frames)  # the reference renders are Gouraud-shaded
     face_rgb = np.empty((t, f, 3), np.float32)
     vertex_rgb = np.empty((t, v, 3), np.float32) if vertex_colors else None
-    tri_rgb, vert_base = anim.triangle_colors()[None], anim.face_base_colors()[None]
+    # decoded once, not per block of frames (0.3 s over the 4,000-frame ICT head's 500 blocks)
+    tri_rgb = srgb_to_linear(anim.triangle_colors()[None])
+    vert_base = srgb_to_linear(anim.face_base_colors()[None]) if vertex_rgb is not None else None
     for blk in _blocks(t):
-        face_rgb[blk] = lambert(unit_face_normals(frames[blk], faces), tri_rgb, camera.view, lighting)
+        face_rgb[blk] = lambert_linear(unit_face_normals(frames[blk], faces), tri_rgb, camera.view, lighting)
         if vertex_rgb is not None:
-            vertex_rgb[blk] = lambert(unit_vertex_normals(frames[blk], faces), vert_base, camera.view, lighting)
+            vertex_rgb[blk] = lambert_linear(unit_vertex_normals(frames[blk], faces), vert_base, camera.view,
+                                             lighting)
     _, neutral_z, _ = camera.project(frames[neutral:neutral + 1])  # float64: the order must not see rounding
     order = painter_order(neutral_z, faces, np.flatnonzero(kept), 0)
     refs = {}

@@ -59,10 +59,17 @@ def lambert(
     normals: np.ndarray, base_rgb: np.ndarray, view: np.ndarray, lighting: Lighting = DEFAULT_LIGHTING
 ) -> np.ndarray:
     """Display colour of display base_rgb lit in linear light: srgb(linear(base) * (ambient + diffuse * n.l+))."""
+    return lambert_linear(normals, srgb_to_linear(base_rgb), view, lighting)
+
+
+def lambert_linear(
+    normals: np.ndarray, linear_rgb: np.ndarray, view: np.ndarray, lighting: Lighting = DEFAULT_LIGHTING
+) -> np.ndarray:
+    """lambert of a base colour already decoded (srgb_to_linear): a block of frames of one mesh decodes it once."""
     light = light_direction_world(view, lighting).astype(np.float32)
     gain = np.asarray(np.asarray(normals, np.float32) @ light)  # an array even for one normal
     np.maximum(gain, 0.0, out=gain)  # n.l+, NaN kept (np.clip's semantics)
     gain *= lighting.diffuse
     gain += lighting.ambient
-    lit = srgb_to_linear(base_rgb) * gain[..., None]
+    lit = linear_rgb * gain[..., None]
     return _encode(np.clip(lit, 0.0, 1.0, out=lit))
