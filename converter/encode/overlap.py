@@ -158,11 +158,12 @@ def _entries(lo, hi, cell):
 def _candidates(key, owner, box, band, flag, idx, table, shift, nb, out):
     """Pairs (a < b) of boxes of different band that meet and whose paths (idx[a], idx[b]) are not yet in the
     PairSet table, as (buffer, M): the pairs are buffer[:M], buffer being out (K, 2) or, when more than K pairs
-    come, a larger one (passed again to the next block, so a block's pairs fill pages already touched: growing a
-    fresh buffer per block faulted in 2.5 GB over the 128k-triangle face's 67 blocks). From the entries of
-    _cell_lists: a cell's boxes of one band are
-    consecutive, so only pairs across its bands are looked at, and a cell inside one band costs one pass (on the
-    128k-triangle face, 43 % of the cells and half the pairs within cells: 19.7 -> 13.8 s over its 335 frames).
+    come, a larger one, which the caller passes in for the next block (a fresh buffer per block, grown by
+    doubling, faulted in ~1.5 GB over the 128k-triangle face's 67 blocks).
+
+    From the entries of _cell_lists: a cell's boxes of one band are consecutive, so only pairs across its bands
+    are looked at, and a cell inside one band costs one pass (on the 128k-triangle face, 43 % of the cells and half
+    the pairs within cells: 19.7 -> 13.8 s over its 335 frames).
 
     Each pair is reported in one cell only: the cell holding the low corner of the two boxes' intersection, which
     both cover when they meet: there, in x and in y, the cell is the lowest of one of the two boxes."""
