@@ -194,12 +194,12 @@ def extract(
     face_rgb = np.empty((t, f, 3), np.float32)
     vertex_rgb = np.empty((t, v, 3), np.float32) if vertex_colors else None
     # decoded once, not per block of frames (0.3 s over the 4,000-frame ICT head's 500 blocks)
-    tri_rgb = srgb_to_linear(anim.triangle_colors()[None])
-    vert_base = srgb_to_linear(anim.face_base_colors()[None]) if vertex_rgb is not None else None
+    tri_linear = srgb_to_linear(anim.triangle_colors()[None])
+    vert_linear = srgb_to_linear(anim.face_base_colors()[None]) if vertex_rgb is not None else None
     for blk in _blocks(t):
-        face_rgb[blk] = lambert_linear(unit_face_normals(frames[blk], faces), tri_rgb, camera.view, lighting)
+        face_rgb[blk] = lambert_linear(unit_face_normals(frames[blk], faces), tri_linear, camera.view, lighting)
         if vertex_rgb is not None:
-            vertex_rgb[blk] = lambert_linear(unit_vertex_normals(frames[blk], faces), vert_base, camera.view,
+            vertex_rgb[blk] = lambert_linear(unit_vertex_normals(frames[blk], faces), vert_linear, camera.view,
                                              lighting)
     _, neutral_z, _ = camera.project(frames[neutral:neutral + 1])  # float64: the order must not see rounding
     order = painter_order(neutral_z, faces, np.flatnonzero(kept), 0)
