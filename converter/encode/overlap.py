@@ -244,8 +244,8 @@ class PairSet:
         self.count += added
 
     def pairs(self, relabel: np.ndarray | None = None) -> np.ndarray:
-        """The pairs (E, 2), sorted, each path a renamed relabel[a] (a permutation of 0..n-1; default a) and each
-        pair written (smaller, larger)."""
+        """The pairs (E, 2), sorted, with each path a renamed to relabel[a] (relabel: a permutation of 0..n-1,
+        default none) and each pair written (smaller, larger)."""
         relabel = np.arange(self.n, dtype=np.int64) if relabel is None else np.asarray(relabel, np.int64)
         code = np.empty(self.count, np.int64)  # smaller * n + larger: one array sorted in place (the 11 M pairs of
         # the 128k-triangle face took 1.2 s as separate arrays relabelled, compared and sorted)
