@@ -63,7 +63,7 @@ HEAD_CLUSTERS = 24  # motion clusters of the largest band (the head)
 CLUSTER_MIN_TRIANGLES = 50  # fewer clusters on small heads: at least this many triangles each
 CLUSTER_COMPONENTS = 12  # principal components of the residual trajectories the clustering uses
 CLUSTER_PLACE_WEIGHT = 0.5  # weight of the neutral position against the motion features (keeps clusters compact)
-SPREAD_FRAMES = 64  # frames a block when measuring how far the head's residual trajectories spread
+FRAME_BLOCK = 64  # frames a block where a (T, V, 2) temporary is worked a block of frames at a time
 MIN_BAND_TRIANGLES = 12  # smaller connected pieces join their part's largest piece
 SMALL_BAND_TRIANGLES, SMALL_BAND_SHARE = 100, 0.02  # pieces below max(these) never get a band of their own
 MERGE_PX = 1.5  # a piece whose motion a larger band explains this well (px, 95th percentile) joins it
@@ -236,14 +236,16 @@ def motion_clusters(band: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutral
     ref = xy[neutral, verts]
     center = ref.mean(axis=0)
     fit = fit_affine(ref - center, xy, verts)
-    fitted = apply_linear(fit[:, :, :2], ref - center)
-    fitted += fit[:, None, :, 2]
-    res = np.take(xy, verts, axis=1)
-    res -= fitted
+    res, rel = np.take(xy, verts, axis=1), ref - center
+    fitted = np.empty((min(len(res), FRAME_BLOCK),) + res.shape[1:])  # a block of frames: fresh pages cost
+    for sl in blocks(len(res), FRAME_BLOCK):
+        part = apply_linear(fit[sl, :, :2], rel, out=fitted[:sl.stop - sl.start])
+        part += fit[sl, None, :, 2]
+        res[sl] -= part
     del fitted
     mean = res.mean(axis=0)
     spread = np.empty(res.shape[:2])
-    for sl in blocks(len(res), SPREAD_FRAMES):  # a block of frames at a time: no temporary of res's size
+    for sl in blocks(len(res), FRAME_BLOCK):  # a block of frames at a time: no temporary of res's size
         spread[sl] = lengths(res[sl] - mean)
     del mean
     if np.percentile(spread, 95) <= MERGE_PX:
@@ -275,14 +277,16 @@ def principal_components(feat: np.ndarray, k: int) -> np.ndarray:
 
 
 # --- affine fits and the transform stack -----------------------------------------------------------------------
-def apply_linear(lin: np.ndarray, pts: np.ndarray) -> np.ndarray:
+def apply_linear(lin: np.ndarray, pts: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """Per frame t the 2x2 map lin[t] (T, 2, 2) applied to the points pts[t] (T, ..., 2), or to the same points
-    pts (N, 2) in every frame -> (T, N, 2). A matrix product: einsum takes ~15x longer on (T, P, 3, 2) tracks."""
+    pts (N, 2) in every frame -> (T, N, 2); into out (contiguous, pts' shape or (T, N, 2)) when given. A matrix
+    product: einsum takes ~15x longer on (T, P, 3, 2) tracks."""
     lin_t = np.swapaxes(lin, 1, 2)
     if pts.ndim == 2:
-        return pts[None] @ lin_t
+        return np.matmul(pts[None], lin_t, out=out)
     t = pts.shape[0]
-    return (pts.reshape(t, -1, 2) @ lin_t).reshape(pts.shape)
+    flat = None if out is None else out.reshape(t, -1, 2)
+    return np.matmul(pts.reshape(t, -1, 2), lin_t, out=flat).reshape(pts.shape)
 
 
 def decompose(a: np.ndarray, center: np.ndarray) -> np.ndarray:
@@ -417,9 +421,17 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
     ids, sizes = np.unique(merged, return_counts=True)
     head = _motion(xy64, unique_ints(faces[merged == ids[np.argmax(sizes)]]), neutral, HEAD_SHARE * tolerance,
                    scale, kt_decimals)
-    xy64 -= head.matrices[:, None, :, 2]  # local_tracks, worked in place: xy64 is not needed after this
-    in_head = apply_linear(np.linalg.inv(head.matrices[:, :, :2]), xy64)  # head frame px, about its centroid
-    del xy64  # the rest works in the head's frame (and the overlap test on the float32 xy)
+    # local_tracks, worked in xy64's place a block of frames at a time (xy64 is not needed after this): a second
+    # (T, V, 2) float64 array, fresh pages for the kernel to zero, took 0.5 s of system time on 128k triangles
+    in_head = xy64  # head frame px, about its centroid; the rest works in it (and the overlap test on the float32 xy)
+    del xy64
+    inv = np.linalg.inv(head.matrices[:, :, :2])
+    buf = np.empty((min(t, FRAME_BLOCK),) + in_head.shape[1:])
+    for sl in blocks(t, FRAME_BLOCK):
+        part = in_head[sl]
+        part -= head.matrices[sl, None, :, 2]
+        part[...] = apply_linear(inv[sl], part, out=buf[:len(part)])
+    del buf
     band_of_tri = motion_clusters(merged, faces, in_head, neutral, head_clusters)
     band_ids, band = np.unique(band_of_tri[tris], return_inverse=True)
     motions = _motions(in_head, [unique_ints(faces[band_of_tri == b]) for b in band_ids.tolist()], neutral,
