@@ -346,19 +346,12 @@ def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
     m = xy.shape[2] // 2
     r = np.broadcast_to(np.asarray(radius, np.float64), (n,))
     if best is None:
-        best = keys.Keys(np.zeros((t + 1, n), bool), np.zeros((t + 1, n, 2 * m), np.float32),
-                         np.where(np.any(active, axis=0), np.argmax(active, axis=0), -1))
-        base, shapes = shapes[0], shapes[1:]
-    else:
-        base = None
+        best, _ = shape_keys(xy, active, r, shapes[0])
+        shapes = shapes[1:]
     angles = np.array(shapes, np.float64)
     size = block_tracks(t)
     for b in range(0, n, size):  # blocks of tracks: the dense keys and the lean stay small
         sl = slice(b, b + size)
-        if base is not None:
-            k, _ = _reduce_block(xy, active[:, sl], r[sl], None, _scale(base, m), np.arange(b, min(b + size, n)),
-                                 np.float32)
-            best.mask[:, sl], best.values[:, sl] = k.mask, k.values
         nearest = None
         if not exhaustive and len(shapes) > 1:
             lean = lean_deg(xy[:, sl], active[:, sl])
@@ -374,6 +367,26 @@ def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
             win = np.flatnonzero(~gave_up & (k.mask.sum(axis=0) < limit))
             best.mask[:, idx[win]], best.values[:, idx[win]] = k.mask[:, win], k.values[:, win]
     return best
+
+
+def shape_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray, deg: float,
+               limit: np.ndarray | None = None) -> tuple[keys.Keys, np.ndarray]:
+    """Free-knot keys for tracks of 2D points xy (T, N, 2m) within the rectangle of angle deg inscribed in each
+    point's circle of radius where active (values float32, as point_keys'). With limit (N,), a track gives up
+    (gave_up (N,) True, no keys) once it cannot end with fewer than limit keys."""
+    t, n = xy.shape[:2]
+    m = xy.shape[2] // 2
+    r = np.broadcast_to(np.asarray(radius, np.float64), (n,))
+    out = keys.Keys(np.zeros((t + 1, n), bool), np.zeros((t + 1, n, 2 * m), np.float32),
+                    np.where(np.any(active, axis=0), np.argmax(active, axis=0), -1))
+    gave_up = np.zeros(n, bool)
+    size = block_tracks(t)
+    for b in range(0, n, size):  # blocks of tracks: the dense keys stay small
+        sl = slice(b, b + size)
+        k, gave_up[sl] = _reduce_block(xy, active[:, sl], r[sl], None if limit is None else limit[sl],
+                                       _scale(deg, m), np.arange(b, min(b + size, n)), np.float32)
+        out.mask[:, sl], out.values[:, sl] = k.mask, k.values
+    return out, gave_up
 
 
 def _scale(deg: float, m: int) -> np.ndarray:

@@ -66,6 +66,11 @@ CLUSTER_PLACE_WEIGHT = 0.5  # weight of the neutral position against the motion 
 FRAME_BLOCK = 64  # frames a block where a (T, V, 2) temporary is worked a block of frames at a time
 MIN_BAND_TRIANGLES = 12  # smaller connected pieces join their part's largest piece
 SMALL_BAND_TRIANGLES, SMALL_BAND_SHARE = 100, 0.02  # pieces below max(these) never get a band of their own
+NO_LIMIT = np.iinfo(np.int64).max  # freeknots' limit for a track that never stops early
+# A path of a run that may pay stops its head-local keys at (1 + STOP_SLACK) its band-local keys plus STOP_SHARE
+# times its share of the keys the run must save. Tighter stops sooner but proves fewer runs: on the 128k-triangle
+# bench face (0, 1) redid 26k of 92k paths, (0.2, 1.5) about 1.2k.
+STOP_SLACK, STOP_SHARE = 0.2, 1.5
 MERGE_PX = 1.5  # a piece whose motion a larger band explains this well (px, 95th percentile) joins it
 HEAD_SHARE = 0.1  # px the head transform's keyframing may leave to the residual, as a share of the tolerance
 BAND_SHARE = 0.3  # the same for each band's transform inside the head's (smooth there, and repeated per run)
@@ -499,39 +504,75 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     r_head = float(budget.local_keys(np.array([lay.head.gain]))[0])
     ok = r_local > 0.05 * global_radius  # a band that magnifies errors too much is not worth it
 
-    def keys_of(x, r, cols):
+    def keys_of(x, r, cols, limit=None):
         # Squares only: which paths to wrap is decided on these; the other shapes refine the chosen tracks below.
         radii = np.broadcast_to(np.maximum(r, 1e-6), (p,))[cols]
-        return freeknots.point_keys(x, np.take(act, cols, axis=1), radii, freeknots.SHAPES_DEG[:1])
+        return freeknots.shape_keys(x, np.take(act, cols, axis=1), radii, freeknots.SHAPES_DEG[0], limit)
 
     size = freeknots.block_tracks(t)
-    head_keys = keyframes.join([keyframes.pack(keys_of(lay.head_local.take(sl), r_head, np.arange(p)[sl]))
-                                for sl in blocks(p, size)])  # head-local, a block of paths at a time
-    kh_n = np.diff(head_keys.start)
+
+    def head_keys_of(paths: np.ndarray, limit: np.ndarray | None = None) -> tuple[keyframes.Packed, np.ndarray]:
+        # head-local, a block of paths at a time (the dense keys stay small)
+        parts, gave_up = [], np.zeros(len(paths), bool)
+        for sl in blocks(len(paths), size):
+            k, gave_up[sl] = keys_of(lay.head_local.take(paths[sl]), r_head, paths[sl],
+                                     None if limit is None else limit[sl])
+            parts.append(keyframes.pack(k))
+        return keyframes.join(parts), gave_up
+
     group_bytes = [costs.transform(m) for m in lay.motions]
     runs = list(zip(lay.runs[:-1].tolist(), lay.runs[1:].tolist()))
 
     def pays(a: int, saved_bytes: float) -> bool:  # wrapping run a..: its band's group, once more
         return bool(ok[a]) and saved_bytes > group_bytes[int(lay.band[a])] + costs.close
 
-    # A run saves at most its head-local keys: band-local keys are worked out only where that could pay.
-    maybe = [(a, b) for a, b in runs if pays(a, kh_n[a:b].sum() * costs.key)]
-    kl_n = kh_n.copy()
+    def wraps(a: int, b: int, kh: np.ndarray) -> bool:  # at most its head-local keys kh, and what it saves, pay
+        return pays(a, kh.sum() * costs.key) and pays(a, ((kh - kl_n[a:b]) * costs.key).sum())
+
+    # Band-local keys first, then head-local ones: a path of a run that may pay stops its head-local keys once it
+    # needs STOP_SLACK more than its band-local keys and STOP_SHARE times its share of the group's cost (freeknots'
+    # limit). Where those lower bounds already make the run pay, their full counts are not needed (wrapped paths:
+    # their head-local keys were twice the band-local ones on the 128k-triangle bench face); in the other runs the
+    # paths that stopped are redone. The groups, keys and counts are those of every head-local track in full.
+    kh_n, kl_n = np.zeros(p, np.int64), np.zeros(p, np.int64)
+    head_parts: list[keyframes.Packed] = []
     wrapped_runs: list[tuple[int, int]] = []
     local_keys: dict[int, keyframes.Packed] = {}  # first path of a wrapped run -> its band-local keys
     wrapped = np.zeros(p, bool)
-    for block in _run_blocks(maybe, size):
-        cand = np.concatenate([np.arange(a, b) for a, b in block])
-        kl = keyframes.pack(keys_of(lay.band_local(cand), r_local, cand))
-        kl_n[cand] = np.diff(kl.start)
+    for block in _run_blocks([(a, b) for a, b in runs if b > a], size):
+        lo, hi = block[0][0], block[-1][1]
+        cand = [(a, b) for a, b in block if ok[a]]
+        limit = np.full(hi - lo, NO_LIMIT, np.int64)
+        kl = None
+        if cand:
+            sel = np.concatenate([np.arange(a, b) for a, b in cand])
+            kl = keyframes.pack(keys_of(lay.band_local(sel), r_local, sel)[0])
+            kl_n[sel] = np.diff(kl.start)
+            for a, b in cand:
+                share = int((group_bytes[int(lay.band[a])] + costs.close) / costs.key // (b - a)) + 1
+                limit[a - lo:b - lo] = (np.floor(kl_n[a:b] * (1 + STOP_SLACK)).astype(np.int64)
+                                        + max(int(STOP_SHARE * share), 1))
+        kh, gave_up = head_keys_of(np.arange(lo, hi), limit)
+        kh_n[lo:hi] = np.where(gave_up, limit, np.diff(kh.start))  # at least, where they stopped
+        redo = [np.arange(a, b)[gave_up[a - lo:b - lo]] for a, b in cand
+                if gave_up[a - lo:b - lo].any() and not wraps(a, b, kh_n[a:b])]
+        if redo:
+            sel = np.concatenate(redo)
+            exact, _ = head_keys_of(sel)
+            kh = keyframes.replace(kh, sel - lo, exact)
+            kh_n[sel] = np.diff(exact.start)
+        head_parts.append(kh)
         at = 0
-        for a, b in block:
-            if pays(a, ((kh_n[a:b] - kl_n[a:b]) * costs.key).sum()):
+        for a, b in cand:
+            if wraps(a, b, kh_n[a:b]):
                 wrapped_runs.append((a, b))
                 wrapped[a:b] = True
                 local_keys[a] = kl.part(at, at + b - a)
             at += b - a
         del kl
+    if not head_parts:  # no paths
+        head_parts.append(keyframes.pack(keys_of(lay.head_local.take(np.arange(0)), r_head, np.arange(0))[0]))
+    head_keys = keyframes.join(head_parts)
     head_bytes = costs.transform(lay.head)
     n_keys = np.where(wrapped, kl_n, kh_n)
     transform_bytes = head_bytes + sum(group_bytes[int(lay.band[a])] for a, _ in wrapped_runs)

@@ -81,6 +81,22 @@ def join(parts: list[Packed]) -> Packed:
                   np.concatenate([[0]] + [p.start[1:] + e for p, e in zip(parts, ends[:-1])]).astype(np.int64))
 
 
+def replace(base: Packed, cols: np.ndarray, new: Packed) -> Packed:
+    """base with its tracks cols (ascending) replaced by new's tracks, in order."""
+    counts = np.diff(base.start)
+    counts[cols] = np.diff(new.start)
+    start = np.zeros(len(counts) + 1, np.int64)
+    np.cumsum(counts, out=start[1:])
+    from_new = np.zeros(len(counts), bool)
+    from_new[cols] = True
+    values = np.empty((int(start[-1]),) + base.values.shape[1:], base.values.dtype)
+    values[np.repeat(from_new, counts)] = new.values
+    values[np.repeat(~from_new, counts)] = base.values[np.repeat(~from_new, np.diff(base.start))]
+    mask = base.mask.copy()
+    mask[:, cols] = new.mask
+    return Packed(mask, values, base.first_active, start)
+
+
 def reduce(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray) -> Keys:
     """Greedy keys on sampled values for tracks x (T, N, D), within eps per coordinate where active."""
     x = np.ascontiguousarray(x, np.float64)

@@ -346,6 +346,53 @@ def test_plan_timeline_holds_its_tracks_within_radius(sheet):
     assert worst > 0.5 and over <= 1e-4  # float32 key values: the budget's float_err (1e-3 px here) covers them
 
 
+@pytest.mark.parametrize("stop", [(0.0, 0.0), (groups.STOP_SLACK, groups.STOP_SHARE)])
+def test_head_local_keys_stopped_early_make_the_plan_in_full(sheet, monkeypatch, stop):
+    """Head-local keys stop early on runs that may pay (lower bounds decide them; the others' stopped paths are
+    redone): the same groups, stats, tracks and timeline as every head-local track worked out in full. The tight
+    stop (0, 0) leaves runs its bounds cannot decide, so the redoing is exercised too."""
+    monkeypatch.setattr(groups, "STOP_SLACK", 1e9)  # never reached: every track in full
+    full, *_ = _plan(sheet, 0.25)
+    monkeypatch.setattr(groups, "STOP_SLACK", stop[0])
+    monkeypatch.setattr(groups, "STOP_SHARE", stop[1])
+    calls = []
+    real = freeknots.shape_keys
+
+    def spy(xy, active, radius, deg, limit=None):
+        k, gave_up = real(xy, active, radius, deg, limit)
+        calls.append((limit is not None, int(gave_up.sum())))
+        return k, gave_up
+
+    redone = []
+    replace = keyframes.replace
+    monkeypatch.setattr(freeknots, "shape_keys", spy)
+    monkeypatch.setattr(keyframes, "replace", lambda base, cols, new: redone.append(len(cols)) or
+                        replace(base, cols, new))
+    early, *_ = _plan(sheet, 0.25)
+    assert full.stats["groups"] >= 2 and sum(g for lim, g in calls if lim) > 0
+    if stop == (0.0, 0.0):
+        assert sum(redone) > 0
+    assert np.array_equal(full.groups, early.groups) and full.stats == early.stats
+    assert np.array_equal(full.track.take(slice(None)), early.track.take(slice(None)))
+    assert all(np.array_equal(a, b) for a, b in zip(full.timeline, early.timeline))
+
+
+def test_replace_puts_tracks_in_place():
+    rng = np.random.default_rng(4)
+    mask = rng.random((9, 6)) < 0.4
+    mask[0] = True
+    keys = keyframes.Keys(mask, rng.normal(size=(9, 6, 2)).astype(np.float32), np.zeros(6, np.int64))
+    other = keyframes.Keys(~mask, rng.normal(size=(9, 6, 2)).astype(np.float32), np.zeros(6, np.int64))
+    cols = np.array([1, 4, 5])
+    part = keyframes.Keys(other.mask[:, cols], other.values[:, cols], other.first_active[cols])
+    mixed = keyframes.replace(keyframes.pack(keys), cols, keyframes.pack(part))
+    want = keys._replace(mask=keys.mask.copy(), values=keys.values.copy())
+    want.mask[:, cols], want.values[:, cols] = other.mask[:, cols], other.values[:, cols]
+    got = mixed.unpack(0, 6)
+    assert np.array_equal(got.mask, want.mask)
+    assert np.array_equal(got.values[got.mask], want.values[want.mask])
+
+
 def test_run_blocks_keep_order_and_size():
     runs = [(0, 3), (3, 4), (4, 10), (10, 12), (12, 13)]
     blocks = groups._run_blocks(runs, 4)
