@@ -58,19 +58,36 @@ class Packed(NamedTuple):
 
     def unpack(self, a: int, b: int) -> Keys:
         """Dense Keys of tracks a..b-1 (values zero where not a key)."""
-        sub = self.mask[:, a:b]
-        pk, fk = np.nonzero(sub.T)
+        sub = self.mask[:, a:b].copy()
         values = np.zeros((sub.shape[0], sub.shape[1], self.values.shape[1]), self.values.dtype)
-        values[fk, pk] = self.values[self.start[a]:self.start[b]]
-        return Keys(sub.copy(), values, self.first_active[a:b])
+        _move_keys(sub, values, self.values, self.start[a:b + 1], False)
+        return Keys(sub, values, self.first_active[a:b])
 
 
 def pack(keys: Keys) -> Packed:
     """keys with only their key values kept."""
-    pk, fk = np.nonzero(keys.mask.T)
     start = np.zeros(keys.mask.shape[1] + 1, np.int64)
     np.cumsum(np.count_nonzero(keys.mask, axis=0), out=start[1:])
-    return Packed(keys.mask, keys.values[fk, pk], keys.first_active, start)
+    values = np.empty((int(start[-1]), keys.values.shape[2]), keys.values.dtype)
+    _move_keys(keys.mask, keys.values, values, start, True)
+    return Packed(keys.mask, values, keys.first_active, start)
+
+
+@numba.njit(cache=True, nogil=True)
+def _move_keys(mask, dense, packed, start, to_packed) -> None:
+    """Key values between dense (T + 1, N, D), where mask, and packed (K, D), track by track from start (N + 1,),
+    each track's by frame: in one pass over the frames (np.nonzero of the transposed mask and a fancy-indexed
+    gather took 4 ms a 1,024-path block)."""
+    at = start[:-1].copy()
+    for k in range(mask.shape[0]):
+        for j in range(mask.shape[1]):
+            if mask[k, j]:
+                for c in range(dense.shape[2]):
+                    if to_packed:
+                        packed[at[j], c] = dense[k, j, c]
+                    else:
+                        dense[k, j, c] = packed[at[j], c]
+                at[j] += 1
 
 
 def join(parts: list[Packed]) -> Packed:
