@@ -50,6 +50,7 @@ from scipy.cluster.vq import kmeans2
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import LinearOperator, eigsh
 
+from converter import heap
 from converter.arrays import lengths, unique_ints
 from converter.encode import collapse, freeknots
 from converter.encode import keys as keyframes
@@ -557,19 +558,25 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
         redo = [np.arange(a, b)[gave_up[a - lo:b - lo]] for a, b in cand
                 if gave_up[a - lo:b - lo].any() and not wraps(a, b, kh_n[a:b])]
         if redo:
-            sel = np.concatenate(redo)
-            exact, _ = head_keys_of(sel)
-            kh = keyframes.replace(kh, sel - lo, exact)
-            kh_n[sel] = np.diff(exact.start)
-        head_parts.append(kh)
-        at = 0
+            again = np.concatenate(redo)
+            exact, _ = head_keys_of(again)
+            kh = keyframes.replace(kh, again - lo, exact)
+            kh_n[again] = np.diff(exact.start)
+        at, chosen = 0, []
         for a, b in cand:
             if wraps(a, b, kh_n[a:b]):
                 wrapped_runs.append((a, b))
                 wrapped[a:b] = True
-                local_keys[a] = kl.part(at, at + b - a)
+                chosen.append((a, b, at))
             at += b - a
-        del kl
+        # Each path keeps one set of keys: band-local where wrapped, else head-local (copies, so that the block's
+        # arrays of the other set go)
+        head_parts.append(keyframes.emptied(kh, np.flatnonzero(wrapped[lo:hi])))
+        if chosen:
+            kl = keyframes.emptied(kl, np.flatnonzero(~wrapped[sel]))
+            for a, b, at in chosen:
+                local_keys[a] = kl.part(at, at + b - a)
+        del kl, kh
     if not head_parts:  # no paths
         head_parts.append(keyframes.pack(keys_of(lay.head_local.take(np.arange(0)), r_head, np.arange(0))[0]))
     head_keys = keyframes.join(head_parts)
@@ -607,6 +614,7 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
                                      best=k)
         return k._replace(values=k.values[..., :6])
 
+    heap.give_back()  # the decision's blocks of tracks and dense keys, before the refining's
     timeline = collapse.fold_blocks(act, best_keys, max(16, size // 4))  # small blocks: their refining
     # temporaries (dense keys, jitter) come on top of every path's tracks and keys
     return Plan(lay.order, track, radius, np.array(wrapped_runs, np.int64).reshape(-1, 2), band, gain,

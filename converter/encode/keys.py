@@ -114,6 +114,15 @@ def replace(base: Packed, cols: np.ndarray, new: Packed) -> Packed:
     return Packed(mask, values, base.first_active, start)
 
 
+def emptied(base: Packed, cols: np.ndarray) -> Packed:
+    """base with its tracks cols (ascending) holding no keys (base itself when there are none)."""
+    if not len(cols):
+        return base
+    empty = Packed(np.zeros((base.mask.shape[0], len(cols)), bool), base.values[:0], base.first_active[cols],
+                   np.zeros(len(cols) + 1, np.int64))
+    return replace(base, cols, empty)
+
+
 def reduce(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray) -> Keys:
     """Greedy keys on sampled values for tracks x (T, N, D), within eps per coordinate where active."""
     x = np.ascontiguousarray(x, np.float64)
