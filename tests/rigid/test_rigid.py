@@ -377,7 +377,7 @@ def test_head_local_keys_stopped_early_make_the_plan_in_full(sheet, monkeypatch,
     assert all(np.array_equal(a, b) for a, b in zip(full.timeline, early.timeline))
 
 
-def test_replace_puts_tracks_in_place():
+def test_replace_and_emptied_put_tracks_in_place():
     rng = np.random.default_rng(4)
     mask = rng.random((9, 6)) < 0.4
     mask[0] = True
@@ -391,6 +391,12 @@ def test_replace_puts_tracks_in_place():
     got = mixed.unpack(0, 6)
     assert np.array_equal(got.mask, want.mask)
     assert np.array_equal(got.values[got.mask], want.values[want.mask])
+    bare = keyframes.emptied(mixed, cols).unpack(0, 6)  # those tracks hold no keys, the others are unchanged
+    assert not bare.mask[:, cols].any() and not bare.values[:, cols].any()
+    rest = np.setdiff1d(np.arange(6), cols)
+    assert np.array_equal(bare.mask[:, rest], want.mask[:, rest])
+    assert np.array_equal(bare.values[:, rest], got.values[:, rest])
+    assert keyframes.emptied(mixed, cols[:0]) is mixed
 
 
 def test_run_blocks_keep_order_and_size():
