@@ -248,6 +248,7 @@ def motion_clusters(band: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutral
         part = apply_linear(fit[sl, :, :2], rel, out=fitted[:sl.stop - sl.start])
         part += fit[sl, None, :, 2]
         res[sl] -= part
+        del part  # a view of fitted: it would keep the buffer alive
     del fitted
     mean = res.mean(axis=0)
     spread = np.empty(res.shape[:2])
@@ -434,10 +435,9 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
     del xy64
     inv = np.linalg.inv(head.matrices[:, :, :2])
     buf = np.empty((min(t, FRAME_BLOCK),) + in_head.shape[1:])
-    for sl in blocks(t, FRAME_BLOCK):
-        part = in_head[sl]
-        part -= head.matrices[sl, None, :, 2]
-        part[...] = apply_linear(inv[sl], part, out=buf[:len(part)])
+    for sl in blocks(t, FRAME_BLOCK):  # no name is left holding a view: it would keep the float64 array alive
+        in_head[sl] -= head.matrices[sl, None, :, 2]
+        in_head[sl] = apply_linear(inv[sl], in_head[sl], out=buf[:sl.stop - sl.start])
     del buf
     band_of_tri = motion_clusters(merged, faces, in_head, neutral, head_clusters)
     band_ids, band = np.unique(band_of_tri[tris], return_inverse=True)
