@@ -578,9 +578,7 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
             for a, b, at in chosen:
                 local_keys[a] = kl.part(at, at + b - a)
         del kl, kh
-    if not head_parts:  # no paths
-        head_parts.append(keyframes.pack(keys_of(lay.head_local.take(np.arange(0)), r_head, np.arange(0))[0]))
-    head_keys = keyframes.join(head_parts)
+    head_keys = keyframes.join(head_parts)  # p >= 1 (svg_anim plans only paths it draws): one block at least
     head_bytes = costs.transform(lay.head)
     n_keys = np.where(wrapped, kl_n, kh_n)
     transform_bytes = head_bytes + sum(group_bytes[int(lay.band[a])] for a, _ in wrapped_runs)
