@@ -228,6 +228,21 @@ def test_pair_set_is_a_set():
     assert len(absent) > 1000 and not pairs.has(absent[:, 0], absent[:, 1]).any()
 
 
+def test_pair_set_keeps_a_rows_neighbouring_tiles_in_one_line():
+    # Tiles 4q..4q+3 (one row's) start at 4 consecutive slots of one 64-byte line, in every table size; the
+    # groups spread over the table.
+    for bits in (2, 3, 12, 22):
+        shift = 64 - bits
+        slots = [[int(overlap._slot(np.int64(4 * q + k), shift)) for k in range(4)] for q in range(0, 4000, 7)]
+        assert all(s[0] % 4 == 0 and s == list(range(s[0], s[0] + 4)) for s in slots)
+        groups = min(len(slots), 2 ** bits // 4)
+        assert groups // 4 <= len({s[0] for s in slots}) <= groups
+    assert [int(overlap._slot(np.int64(c), 63)) for c in range(4)] == [0, 1, 0, 1]  # 2 slots: the low bit
+    for slots in (2, 4096, 1 << 16):
+        table = overlap._table(slots)
+        assert table.shape == (slots, 2) and table.ctypes.data % 64 == 0 and (table == overlap.EMPTY).all()
+
+
 def test_screen_order_numbers_neighbours_near():
     # A 64 x 64 grid of points, shuffled: along the Z-order curve consecutive numbers are mostly 1 px apart (in
     # the shuffled order, ~30 px); non-finite points come last.
