@@ -1,8 +1,10 @@
-"""An offscreen OpenGL 4.1 core context on EGL (Mesa here, no window), from PyOpenGL's EGL bindings alone.
+"""An offscreen OpenGL 4.1 core context on EGL (Mesa here, no window), from PyOpenGL's EGL bindings alone, and
+the RenderError that names what to install when EGL is missing.
 
-The occlusion pass used pyrender's EGL platform for this. Importing it imports pyrender's whole package (trimesh,
-its scene graph, its viewer): ~0.5 s CPU in every conversion, a third of converting the bundled sample. The
-context is made as pyrender makes it: the first EGL device when the driver enumerates devices (else the default
+The occlusion pass rendered its ids in this context until converter.raster replaced it; the tests' GL reference
+for that rasteriser (tests/reference/gl_ids.py) still does. Before it, the pass used pyrender's EGL platform,
+whose import brings pyrender's whole package (trimesh, its scene graph, its viewer): ~0.5 s CPU. The context is
+made as pyrender makes it: the first EGL device when the driver enumerates devices (else the default
 display), a pbuffer-capable RGB config, the desktop OpenGL API, no surface.
 """
 
@@ -22,21 +24,6 @@ EGL_HELP = (
     "'apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1' and keep PYOPENGL_PLATFORM=egl"
 )
 _PLATFORM_DEVICE_EXT = 0x313F  # EGL_EXT_platform_device
-_used = False  # an EGL display was (or was about to be) initialised in this process: see used()
-
-
-def used() -> bool:
-    """Whether this process has initialised an EGL display (ours or pyrender's): a forked child would inherit a
-    driver's state that does not survive fork (converter.isolated)."""
-    return _used
-
-
-def mark_used() -> None:
-    """Record that an EGL display is about to be initialised in this process."""
-    global _used
-    _used = True
-
-
 def _egl():
     """PyOpenGL's EGL module with PyOpenGL's function loading switched to EGL (whatever PYOPENGL_PLATFORM said)."""
     import OpenGL.platform  # noqa: PLC0415 - imported late so the EGL platform variable is set first
@@ -117,7 +104,6 @@ class EglContext:
         self._egl = self._display = self._context = None
         with render_errors(self.close):
             self._egl = egl = _egl()
-            mark_used()
             self._display = _display(egl)
             major, minor = egl.EGLint(), egl.EGLint()
             with _raster_threads(raster_threads):

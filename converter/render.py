@@ -11,7 +11,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 import numpy as np
 
 from converter.camera import Camera
-from converter.egl import mark_used, render_errors
+from converter.egl import render_errors
 
 
 def _pyrender():
@@ -37,7 +37,6 @@ class _MatrixCamera:
 def offscreen(width: int, height: int) -> Iterator[object]:
     """An OffscreenRenderer, deleted afterwards; RenderError names what to install when EGL is missing."""
     pyrender = _pyrender()
-    mark_used()
     with render_errors(lambda: None):
         renderer = pyrender.OffscreenRenderer(width, height)
     try:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from reference import gl_ids
 
 from conftest import SAMPLE
 from converter import idpass
@@ -100,12 +101,12 @@ def test_a_triangle_the_frame_does_not_draw_hides_nothing():
     xy, z, w = cam.project(verts)
     vis = cull(xy, z, w, faces, SIZE, SIZE)
     assert vis.tolist() == [[True, False]]
-    with idpass.IdRenderer(SIZE, SIZE, faces, 6) as r:  # drawn whole, GL hides the small one behind the cover
-        everything = r.render(idpass.clip_coords(cam, verts[0]))
+    with gl_ids.IdRenderer(SIZE, SIZE, faces, 6) as r:  # drawn whole, GL hides the small one behind the cover
+        everything = r.render(gl_ids.clip_coords(cam, verts[0]))
         assert (everything == 2).any() and not (everything == 1).any()
-        only_drawn = r.render(idpass.clip_coords(cam, verts[0]), np.array([0]))
+        only_drawn = r.render(gl_ids.clip_coords(cam, verts[0]), np.array([0]))
         assert (only_drawn == 1).any() and set(np.unique(only_drawn)) <= {0, 1}
-        assert np.array_equal(r.render(idpass.clip_coords(cam, verts[0])), everything)  # all faces again
+        assert np.array_equal(r.render(gl_ids.clip_coords(cam, verts[0])), everything)  # all faces again
     assert idpass.ever_seen(verts, faces, cam, vis).tolist() == [True, False]
 
 
@@ -125,8 +126,8 @@ def test_ids_are_exact_at_pixel_centres():
     # so it owns the centres (i + .5, j + .5) with 2 <= i, j and i + j + 1 < 62 (the top-left rule drops none).
     verts = np.array([BIG], np.float32).reshape(-1, 3)
     cam = _camera()
-    with idpass.IdRenderer(SIZE, SIZE, np.array([[0, 1, 2]], np.int32), 3) as r:
-        ids = r.render(idpass.clip_coords(cam, verts))
+    with gl_ids.IdRenderer(SIZE, SIZE, np.array([[0, 1, 2]], np.int32), 3) as r:
+        ids = r.render(gl_ids.clip_coords(cam, verts))
     j, i = np.mgrid[0:SIZE, 0:SIZE]
     expect = (i >= 2) & (j >= 2) & (i + j + 1 < 62)
     assert np.array_equal(ids == 1, expect)
@@ -142,12 +143,12 @@ def test_missing_egl_raises_render_error_naming_what_to_install(monkeypatch):
     with monkeypatch.context() as m:
         m.setattr(OpenGL.platform.PlatformPlugin, "by_name", classmethod(lambda cls, name: None))
         with pytest.raises(RenderError, match="apt-get install libegl1"):
-            idpass.IdRenderer(8, 8, np.zeros((1, 3), np.int32), 3)
+            gl_ids.IdRenderer(8, 8, np.zeros((1, 3), np.int32), 3)
     with monkeypatch.context() as m:
         m.setattr(egl, "_display", lambda e: None)
         with pytest.raises(RenderError, match="apt-get install libegl1.*no EGL display"):
-            idpass.IdRenderer(8, 8, np.zeros((1, 3), np.int32), 3)
-    with idpass.IdRenderer(8, 8, np.zeros((1, 3), np.int32), 3) as r:  # and a working one afterwards
+            gl_ids.IdRenderer(8, 8, np.zeros((1, 3), np.int32), 3)
+    with gl_ids.IdRenderer(8, 8, np.zeros((1, 3), np.int32), 3) as r:  # and a working one afterwards
         assert r.render(np.zeros((3, 4), np.float32)).shape == (8, 8)
 
 
@@ -184,9 +185,9 @@ def test_on_the_sample_every_pixel_owner_is_kept_and_fewer_visible_triangles_are
     s, f = 5, anim.n_faces
     fine = Camera(cam.view, cam.projection, cam.width * s, cam.height * s, cam.ortho)
     seen_fine, owns_centre = np.zeros(f, bool), np.zeros(f, bool)
-    with idpass.IdRenderer(fine.width, fine.height, anim.faces, anim.n_vertices) as r:
+    with gl_ids.IdRenderer(fine.width, fine.height, anim.faces, anim.n_vertices) as r:
         for k in range(len(frames)):
-            ids = r.render(idpass.clip_coords(fine, frames[k]))
+            ids = r.render(gl_ids.clip_coords(fine, frames[k]))
             seen_fine |= (np.bincount(ids.ravel(), minlength=f + 1)[1:] > 0) & vis[k]
             owns_centre |= (np.bincount(ids[s // 2::s, s // 2::s].ravel(), minlength=f + 1)[1:] > 0) & vis[k]
     assert not (owns_centre & ~new).any()
@@ -211,11 +212,11 @@ def test_the_id_pass_asks_llvmpipe_for_no_raster_threads_unless_the_environment_
     rng = np.random.default_rng(2)
     verts = rng.uniform(-1, 1, (60, 3))
     faces = rng.integers(0, 60, (40, 3)).astype(np.int32)
-    clip = idpass.clip_coords(cam, verts)
+    clip = gl_ids.clip_coords(cam, verts)
     ids = []
     for threads in ("2", "0"):  # the environment's choice wins over the id pass's 0
         monkeypatch.setenv("LP_NUM_THREADS", threads)
-        with idpass.IdRenderer(64, 64, faces, 60) as r:
+        with gl_ids.IdRenderer(64, 64, faces, 60) as r:
             ids.append(r.render(clip).copy())
     assert ids[0].any() and np.array_equal(ids[0], ids[1])
 
@@ -225,9 +226,9 @@ def _reference_ever_seen(frames, faces, camera, visible):
     kept = np.zeros(faces.shape[0], bool)
     faces64 = faces.astype(np.int64)
     for k in range(frames.shape[0]):
-        clip = idpass.clip_coords(camera, frames[k])
+        clip = gl_ids.clip_coords(camera, frames[k])
         drawn = np.flatnonzero(visible[k])  # only what the SVG draws in the frame can hide: a mesh of just those
-        with idpass.IdRenderer(camera.width, camera.height, faces[drawn], frames.shape[1]) as r:
+        with gl_ids.IdRenderer(camera.width, camera.height, faces[drawn], frames.shape[1]) as r:
             ids = r.render(clip)
         ids = np.where(ids > 0, drawn[ids.astype(np.intp) - 1] + 1, 0)
         shown = np.zeros(faces.shape[0] + 1, bool)
@@ -307,9 +308,9 @@ def test_compiled_sub_pixel_rule_keeps_what_numpy_kept():
     assert np.array_equal(got, want)
     # Rule 2 had work on both sides: triangles kept only by it, and sub-pixel ones it dropped.
     centres = np.zeros(faces.shape[0], bool)
-    with idpass.IdRenderer(SIZE, SIZE, faces, verts.shape[1]) as r:
+    with gl_ids.IdRenderer(SIZE, SIZE, faces, verts.shape[1]) as r:
         for k in range(12):
-            ids = np.unique(r.render(idpass.clip_coords(cam, verts[k])))
+            ids = np.unique(r.render(gl_ids.clip_coords(cam, verts[k])))
             centres[ids[ids > 0] - 1] = True
     assert (want & ~centres).sum() > 20 and (visible.any(axis=0) & ~want).sum() > 20
 
