@@ -104,7 +104,7 @@ def _mark(ids, visible, kept):
 def _subpixel(ids, xy, z, faces, visible, kept):
     """Rule 2 of the module docstring, in place: kept[f] = True for each visible face f not yet kept whose
     inscribed circle is narrower than INRADIUS_PX and which is not behind the visible surface at one of its probe
-    points. ids (H, W) as IdRenderer.render gives them; xy (V, 2) pixels with y down and z (V,) NDC depth of the
+    points. ids (H, W) as raster.draw_ids draws them; xy (V, 2) pixels with y down and z (V,) NDC depth of the
     same frame. Compiled: as numpy over each frame's few candidates it cost 0.4 ms a frame in call overhead. The
     arithmetic is numpy's, operation for operation (tests/core/test_occlusion.py keeps that version)."""
     owner = np.empty(3)

@@ -84,10 +84,15 @@ def draw_ids(fixed, xy, z, faces, drawn, ids, depth) -> None:
         zr = z[i0] + ((c_lo + 0.5 - zx) * gx + (r_lo + 0.5 - zy) * gy)
         for r in range(r_lo, r_hi + 1):
             f0, f1, f2, zc = e0, e1, e2, zr
+            entered = False
             for c in range(c_lo, c_hi + 1):
-                if f0 <= 0 and f1 <= 0 and f2 <= 0 and -1.0 <= zc < depth[r, c]:
-                    depth[r, c] = zc
-                    ids[r, c] = f + 1
+                if f0 <= 0 and f1 <= 0 and f2 <= 0:
+                    entered = True
+                    if -1.0 <= zc < depth[r, c]:
+                        depth[r, c] = zc
+                        ids[r, c] = f + 1
+                elif entered:
+                    break  # a row's inside is one run (the triangle is convex)
                 f0 -= dy0 * s
                 f1 -= dy1 * s
                 f2 -= dy2 * s
