@@ -49,15 +49,17 @@ DEPTH_EPS = 1e-6  # NDC depth below which two surfaces count as one (float round
 PROBE_IN = 0.1  # corner probes sit this far from each corner toward the centroid, inside the triangle
 
 CHUNK = 16  # frames per slot between progress reports
+SLOT_BUDGET = 64 << 20  # bytes the slots' buffers may take together, unless one slot needs more: a large --size
+# renders on one thread (at 8192 px one slot takes 805 MB, as llvmpipe's id and depth targets and read-back ids did)
 
 
 def ever_seen(frames: np.ndarray, faces: np.ndarray, camera: Camera, visible: np.ndarray,
               progress=None) -> np.ndarray:
     """Bool (F,): the triangles some frame shows by the module's rule; visible (T, F) is the culling. Frames are
-    split among parallel.THREADS slots, each with its own id and depth buffers."""
+    split among up to parallel.THREADS slots, each with its own id and depth buffers (SLOT_BUDGET)."""
     t, f, v = visible.shape[0], faces.shape[0], frames.shape[1]
-    slots = max(1, min(parallel.THREADS, t))
     h, w = camera.height, camera.width
+    slots = max(1, min(parallel.THREADS, t, SLOT_BUDGET // (h * w * 12 + v * 40)))
     kept = np.zeros((slots, f), bool)
     ids, depth = np.empty((slots, h, w), np.uint32), np.empty((slots, h, w))
     fixed, xy, z = np.empty((slots, v, 2), np.int64), np.empty((slots, v, 2)), np.empty((slots, v))

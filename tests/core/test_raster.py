@@ -133,12 +133,14 @@ def test_the_pass_keeps_the_same_triangles_on_one_thread_or_two_and_reports_prog
     xy, z, w = cam.project(anim.frames)
     visible = cull(xy, z, w, anim.faces, cam.width, cam.height)
     got = []
-    for threads in (1, 2):
+    for threads, budget in ((1, idpass.SLOT_BUDGET), (2, idpass.SLOT_BUDGET), (2, 1)):  # budget 1: one slot
         monkeypatch.setattr(parallel, "THREADS", threads)
+        monkeypatch.setattr(idpass, "SLOT_BUDGET", budget)
         seen: list[float] = []
         got.append(idpass.ever_seen(anim.frames, anim.faces, cam, visible, progress=seen.append))
-        assert seen == sorted(seen) and seen[-1] == 1.0 and len(seen) >= 70 // (idpass.CHUNK * threads)
-    assert np.array_equal(got[0], got[1]) and got[0].sum() > 100
+        slots = threads if budget > 1 else 1
+        assert seen == sorted(seen) and seen[-1] == 1.0 and len(seen) == -(-70 // (idpass.CHUNK * slots))
+    assert np.array_equal(got[0], got[1]) and np.array_equal(got[0], got[2]) and got[0].sum() > 100
 
 
 @pytest.mark.parametrize("shape", [(0, 5), (3, 0)])
