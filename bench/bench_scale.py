@@ -255,19 +255,19 @@ def run() -> str:
     return "\n".join([
         "Default options (flat, bounded, rigid factoring on, 512 px) against the naive writer (`naive_svg`: the same "
         "extraction, then every kept triangle's coordinates at every frame with 2 decimals, streamed). CPU is user+sys of the conversion inside a fresh child process (all "
-        "threads, plus the process the occlusion pass forks: `bench/usage.py`; the face's generation excluded). The cases with a CPU target "
+        "threads, plus any process it forks: `bench/usage.py`; the face's generation excluded). The cases with a CPU target "
         f"(capture-like, 8k x 3,000, 128k) are each mode's median run by CPU of {MEDIAN_RUNS} (since 2026-12-06; before, "
         "the capture-like face's alone), the other cases one run each (the machine, 2 cores, was shared with other "
-        "engineers' jobs: single runs scatter by 10-20 %). Peak MB is the larger of the child's `ru_maxrss`, its forked pass's, and the "
-        "sampled peak of the sum of their PSS (shared pages counted once, every 20 ms while the pass's child lives: "
+        "engineers' jobs: single runs scatter by 10-20 %). Peak MB is the larger of the child's `ru_maxrss`, any forked child's, and the "
+        "sampled peak of the sum of their PSS (shared pages counted once, every 20 ms while a child lives: "
         "`usage.TreePss`; since 2026-12-06 not while the conversion runs alone, where reading its PSS took the bench "
         "a third of a core and contended with the conversion's page faults). The child loads its face from an .npz that a process of its "
         "own generated (until 2026-12-03 the child generated it, and its peak held the generator's heap too), so the "
         f"peak is the interpreter and libraries, the face's frames (~{res[cases[0]][0]['before_mb']:.0f} MB before "
         "converting at 100 frames) and the conversion. The runtime's own share: converting the bundled sample's first "
         f"10 frames peaks at {floor['peak_mb']:,.0f} MB (median of 3; numba's compiled code ~60 MB, measured 2026-12-03; "
-        "Mesa's EGL context, 70-135 MB, is the occlusion pass's alone since 2026-12-06: the pass runs in a child "
-        "forked for it, `converter/isolated.py`, and the context leaves with the child). Writer M tri-frames/s = triangles x frames / "
+        "no Mesa EGL context since 2026-12-06, when the occlusion pass moved to a child process, and none at all "
+        "since its ids are rasterised on the CPU, `converter/raster.py`, 2026-12-06). Writer M tri-frames/s = triangles x frames / "
         "writer CPU.",
         "",
         *rows,

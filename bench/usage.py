@@ -1,5 +1,5 @@
-"""What a measured piece of work cost, counting the processes it forks (converter.isolated runs the occlusion pass
-in a child, so this process's own clock and ru_maxrss would leave the child's share out).
+"""What a measured piece of work cost, counting the processes it forks (the occlusion pass ran in a forked child
+until 2026-12-06; a child's share would be missing from this process's own clock and ru_maxrss).
 
     c = usage.cpu(); work(); seconds = usage.cpu() - c      # user+sys of this process and its waited-for children
     usage.peak_mb()                                          # the larger of this process's and any child's peak RSS
