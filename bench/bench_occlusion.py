@@ -4,7 +4,8 @@
 
 - Cost: process CPU seconds (user + sys of every thread and of waited-for children, bench/usage.py) of the pass alone on the
   capture-like face (bench/capture_like.py, 512 px), median of 3, old = bench/legacy_occlusion.py (the
-  multisampled pyrender pass), new = converter.idpass.
+  multisampled pyrender pass), new = converter.idpass (ids rasterised on the CPU by converter.raster since
+  2026-12-06; before, one integer-id GL render a frame on llvmpipe).
 - Kept sets on the capture-like face and the sample, against a 5x finer id render: "visible" = owns a sample
   of the 5x render in some frame, "centre owner" = owns one of its pixel-centre samples.
 - Coverage on the dense ICT head (50,996 triangles, every part, 512 px, three head turns): pyrender renders
@@ -27,7 +28,7 @@ from bench import usage
 from bench.capture_like import capture_like
 from bench.faces import ict_head
 from bench.legacy_occlusion import legacy_triangle_ids
-from converter import idpass, render
+from converter import idpass, raster, render
 from converter.animation import FaceAnimation
 from converter.camera import Camera
 from converter.extract import cull, fit_camera
@@ -44,14 +45,13 @@ because they are not behind the surface at a probe; those that no 5x sample show
 and lid margins, where the rule errs on the safe side (bytes, never a hole). Net: fewer triangles kept and a third to a half
 as many visible ones missed. On the dense head the old pass left ~550 px of lost coverage per frame (the white
 speckles of issue 15.8), the new one 2-4 px. The sample's goldens (tests/golden) did not change.
-Measured while five other sessions shared the 2 cores (load average 15-20): CPU seconds include contention in
-llvmpipe's threads, so both columns are inflated; the ratio (5.0x) is the figure to read.
+The 5x reference is drawn by converter.raster at 5x the size (GL's rules; tests/core/test_raster.py checks it
+against Mesa's GL render pixel for pixel); until 2026-12-06 it was that GL render.
 """
 
 
 def cpu() -> float:
-    """User + sys seconds of this process (all threads) and its waited-for children (bench/usage.py): the pass
-    runs here once the old pass has initialised EGL, in a forked child otherwise (converter.isolated)."""
+    """User + sys seconds of this process (all threads) and its waited-for children (bench/usage.py)."""
     return usage.cpu()
 
 
@@ -71,11 +71,15 @@ def fine_sets(anim: FaceAnimation, cam: Camera, vis: np.ndarray, s: int = 5) -> 
     f = anim.n_faces
     fine = Camera(cam.view, cam.projection, cam.width * s, cam.height * s, cam.ortho)
     seen, centre = np.zeros(f, bool), np.zeros(f, bool)
-    with idpass.IdRenderer(fine.width, fine.height, anim.faces, anim.n_vertices) as r:
-        for k in range(anim.n_frames):
-            ids = r.render(idpass.clip_coords(fine, anim.frames[k]))
-            seen |= (np.bincount(ids.ravel(), minlength=f + 1)[1:] > 0) & vis[k]
-            centre |= (np.bincount(ids[s // 2::s, s // 2::s].ravel(), minlength=f + 1)[1:] > 0) & vis[k]
+    v, m = anim.n_vertices, fine.projection @ fine.view
+    fixed, xy, z = np.empty((v, 2), np.int64), np.empty((v, 2)), np.empty(v)
+    ids, depth = np.empty((fine.height, fine.width), np.uint32), np.empty((fine.height, fine.width))
+    faces, every = np.ascontiguousarray(anim.faces, np.int64), np.ones(f, bool)  # every face, as GL drew them
+    for k in range(anim.n_frames):
+        raster.window_positions(anim.frames[k], m, fine.width, fine.height, fixed, xy, z)
+        raster.draw_ids(fixed, xy, z, faces, every, ids, depth)
+        seen |= (np.bincount(ids.ravel(), minlength=f + 1)[1:] > 0) & vis[k]
+        centre |= (np.bincount(ids[s // 2::s, s // 2::s].ravel(), minlength=f + 1)[1:] > 0) & vis[k]
     return seen, centre
 
 
@@ -132,7 +136,7 @@ def run() -> str:
         "|---|---:|---:|",
         f"| old: pyrender mesh per frame, MSAA, colour + depth readback, np.unique | {med['old']:.2f} "
         f"| {1000 * med['old'] / anim.n_frames:.1f} |",
-        f"| new: converter.idpass, one context + buffer, R32UI ids, bincount | {med['new']:.2f} "
+        f"| new: converter.idpass, ids rasterised on the CPU (converter.raster), compiled marking | {med['new']:.2f} "
         f"| {1000 * med['new'] / anim.n_frames:.1f} |",
         "",
         "Kept sets against a 5x finer id render ('visible' = owns one of its samples in some frame; 'centre "
