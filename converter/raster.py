@@ -7,10 +7,10 @@ so a pixel centre on an edge two triangles share belongs to exactly one of them.
 plane at the pixel centre, in float64.
 
 Why not GL itself (Mesa's llvmpipe, which this pass used): a face's triangles are a few pixels each, and
-llvmpipe's per-triangle setup and binning dominate its frame. On the 128k-triangle bench face a frame took
-~39 ms of CPU there (draw 18, raster 20) and takes ~3 ms here; the capture-like face 2.7 -> ~0.5 ms. The GL
-renderer stays as the tests' independent reference (tests/core/gl_ids.py): the two agree on every pixel but a
-handful where two surfaces meet within float32 depth rounding.
+llvmpipe's per-triangle setup and binning dominate its frame. On the 128k-triangle bench face a frame's draw
+took ~39 ms of CPU there (draw call 18, rasterisation 20) and takes ~6 ms here; on the capture-like face ~2.7 ms
+there, ~1.3 ms here. The GL renderer stays as the tests' independent reference (tests/reference/gl_ids.py): the
+two draw the same ids on every pixel of the faces tested (float32 window positions snapped as GL snaps them).
 """
 
 from __future__ import annotations
