@@ -71,6 +71,7 @@ def run() -> str:
     body = "\n".join("| " + " | ".join(r) + " |" for r in rows)
     return (
         f"Default options (512 px, tolerance 0.25 px, occlusion on); medians of {REPEATS} runs. Extract includes "
-        "the projection of every frame, culling, the triangle-id occlusion render of every frame (software GL) and "
+        "the projection of every frame, culling, the triangle-id occlusion render of every frame (on the CPU, "
+        "converter.raster) and "
         "shading; write is the SVG encoder.\n\n" + head + body
     )
