@@ -1,10 +1,11 @@
 """The occlusion pass: which triangles are ever seen, from one small integer-id render per frame.
 
 Each frame's ids are rasterised on the CPU by converter.raster, GL's rules without multisampling (it agrees
-with Mesa's llvmpipe pixel for pixel on the bench faces; the tests check it against that GL render), into an id
-and a depth buffer reused for every frame; a compiled loop marks the ids' faces. Frames are split between
-parallel.THREADS slots. GL (llvmpipe) drew the ids until 2026-12: its per-triangle setup made the draw of a
-frame of the 128k-triangle bench face cost ~39 ms of CPU; here the whole frame, rule 2 included, costs ~12 ms.
+with Mesa's llvmpipe on every pixel of the bench faces but depth ties below float32 rounding, and keeps the same
+triangles; the tests check it against that GL render), into an id and a depth buffer reused for every frame; a
+compiled loop marks the ids' faces. Frames are split between parallel.THREADS slots. GL (llvmpipe) drew the
+ids until 2026-12: its per-triangle setup made the draw of a frame of the 128k-triangle bench face cost ~39 ms
+of CPU; here the whole frame, rule 2 included, costs ~12 ms.
 
 A frame draws only the triangles the SVG draws in it (front-facing, in the view: converter.extract.cull), as
 the writers hide the others there: a triangle culled in a frame hides nothing in it (one with a corner behind

@@ -10,7 +10,9 @@ Why not GL itself (Mesa's llvmpipe, which this pass used): a face's triangles ar
 llvmpipe's per-triangle setup and binning dominate its frame. On the 128k-triangle bench face a frame's draw
 took ~39 ms of CPU there (draw call 18, rasterisation 20) and takes ~6 ms here; on the capture-like face ~2.7 ms
 there, ~1.3 ms here. The GL renderer stays as the tests' independent reference (tests/reference/gl_ids.py): the
-two draw the same ids on every pixel of the faces tested (float32 window positions snapped as GL snaps them).
+two draw the same ids on every pixel of the faces tested (float32 window positions snapped as GL snaps them)
+except where two surfaces lie within float32 depth rounding of each other: 1 pixel in 716k on 8 frames of the
+128k face, 0 in 734k on the capture-like face.
 """
 
 from __future__ import annotations
