@@ -24,6 +24,8 @@ EGL_HELP = (
     "'apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1' and keep PYOPENGL_PLATFORM=egl"
 )
 _PLATFORM_DEVICE_EXT = 0x313F  # EGL_EXT_platform_device
+
+
 def _egl():
     """PyOpenGL's EGL module with PyOpenGL's function loading switched to EGL (whatever PYOPENGL_PLATFORM said)."""
     import OpenGL.platform  # noqa: PLC0415 - imported late so the EGL platform variable is set first

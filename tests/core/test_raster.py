@@ -39,6 +39,19 @@ def _px(x: float, y: float, z: float = 0.0) -> list[float]:
     return [x / SIZE * 2 - 1, 1 - y / SIZE * 2, z]
 
 
+def test_ids_are_exact_at_pixel_centres_as_counted_by_hand():
+    # The triangle's legs are 58 px and its diagonal passes through pixel corners, so it owns the centres
+    # (i + .5, j + .5) with 2 <= i, j and i + j + 1 < 62 (the tie rule drops none): ours and GL's alike.
+    cam = _ortho()
+    verts = np.array([_px(2, 2), _px(2, 60), _px(60, 2)], np.float32)
+    faces = np.array([[0, 1, 2]], np.int32)
+    j, i = np.mgrid[0:SIZE, 0:SIZE]
+    expect = (i >= 2) & (j >= 2) & (i + j + 1 < 62)
+    for ids in (_ours(cam, verts, faces), _gl(cam, verts, faces)):
+        assert np.array_equal(ids == 1, expect)
+        assert set(np.unique(ids).tolist()) == {0, 1}
+
+
 def test_the_sample_draws_the_same_ids_as_gl_on_every_pixel():
     from converter.formats import load
     anim = load(SAMPLE)
