@@ -65,6 +65,9 @@ def ever_seen(frames: np.ndarray, faces: np.ndarray, camera: Camera, visible: np
     ids, depth = np.empty((slots, h, w), np.uint32), np.empty((slots, h, w))
     fixed, xy, z = np.empty((slots, v, 2), np.int64), np.empty((slots, v, 2)), np.empty((slots, v))
     m = np.ascontiguousarray(camera.projection @ camera.view, np.float64)
+    if frames.flags.writeable:  # a still's frame, copied out of the animation's (read-only) frames
+        frames = frames.view()
+        frames.flags.writeable = False  # so that _frames has one signature (warm.py compiles it ahead)
     faces64 = np.ascontiguousarray(faces, np.int64)
     visible = np.ascontiguousarray(visible, np.bool_)
     for a in range(0, t, CHUNK * slots):

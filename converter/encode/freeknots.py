@@ -291,7 +291,7 @@ def _reduce_block(x: np.ndarray, active: np.ndarray, eps: np.ndarray, limit: np.
         x = x.astype(np.float64)
     scale = np.ones(d) if scale is None else np.ascontiguousarray(scale, np.float64)
     active = np.ascontiguousarray(active, bool)
-    eps = np.ascontiguousarray(eps, np.float64)
+    eps = np.require(eps, np.float64, ["C", "W"])  # writable: a read-only eps was a kernel signature of its own
     lim = np.full(n, np.iinfo(np.int64).max, np.int64) if limit is None else np.ascontiguousarray(limit, np.int64)
     mask, values = np.zeros((t + 1, n), bool), np.zeros((t + 1, n, d), dtype)
     bad, gave_up = np.zeros(n, bool), np.zeros(n, bool)
@@ -303,29 +303,35 @@ def _reduce_block(x: np.ndarray, active: np.ndarray, eps: np.ndarray, limit: np.
     return keys.Keys(mask, values, np.zeros(0, np.int64)), gave_up
 
 
-def lean_deg(xy: np.ndarray, active: np.ndarray) -> np.ndarray:
-    """Per track of 2D points xy (T, N, 2m), the angle (degrees) of its jitter: atan2 of the summed |second
-    difference| in y and in x over frames active three in a row; NaN for a track that never bends."""
-    ex, ey = np.zeros(xy.shape[1]), np.zeros(xy.shape[1])
-    _jitter(xy, np.asarray(active, np.bool_), ex, ey)
+def lean_deg(xy: np.ndarray, active: np.ndarray, first: int = 0) -> np.ndarray:
+    """Per track of 2D points xy[:, first:first + n] (T, n, 2m), n = active.shape[1], the angle (degrees) of its
+    jitter: atan2 of the summed |second difference| in y and in x over frames active three in a row; NaN for a
+    track that never bends. (xy whole and first, not a slice of it: the kernel then sees one array layout.)"""
+    n = active.shape[1]
+    if not 0 <= first <= first + n <= xy.shape[1]:
+        raise ValueError(f"tracks {first}..{first + n} are not all in xy's {xy.shape[1]}")
+    ex, ey = np.zeros(n), np.zeros(n)
+    _jitter(xy, np.ascontiguousarray(active, np.bool_), first, ex, ey)
     return np.where(ex + ey > 0, np.degrees(np.arctan2(ey, ex)), np.nan)
 
 
 @numba.njit(cache=True, nogil=True)
-def _jitter(xy, active, ex, ey) -> None:
-    """lean_deg's sums into ex, ey (N,): each second difference in xy's dtype (as np.diff makes it), summed in
-    float64 (numpy's where, abs and sum over (T, N, 2m) temporaries took 2 s of the 128k-triangle face's writer)."""
-    t, n, d = xy.shape
+def _jitter(xy, active, first, ex, ey) -> None:
+    """lean_deg's sums into ex, ey (n,) for tracks first.. of xy: each second difference in xy's dtype (as np.diff
+    makes it), summed in float64 (numpy's where, abs and sum over (T, N, 2m) temporaries took 2 s of the
+    128k-triangle face's writer)."""
+    t, n, d = xy.shape[0], active.shape[1], xy.shape[2]
     for k in range(2, t):
-        for j in range(n):
-            if not (active[k, j] and active[k - 1, j] and active[k - 2, j]):
+        for i in range(n):
+            if not (active[k, i] and active[k - 1, i] and active[k - 2, i]):
                 continue
+            j = first + i
             sx, sy = 0.0, 0.0
             for c in range(0, d - 1, 2):
                 sx += abs((xy[k, j, c] - xy[k - 1, j, c]) - (xy[k - 1, j, c] - xy[k - 2, j, c]))
                 sy += abs((xy[k, j, c + 1] - xy[k - 1, j, c + 1]) - (xy[k - 1, j, c + 1] - xy[k - 2, j, c + 1]))
-            ex[j] += sx
-            ey[j] += sy
+            ex[i] += sx
+            ey[i] += sy
 
 
 def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
@@ -354,7 +360,7 @@ def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
         sl = slice(b, b + size)
         nearest = None
         if not exhaustive and len(shapes) > 1:
-            lean = lean_deg(xy[:, sl], active[:, sl])
+            lean = lean_deg(xy, active[:, sl], b)
             nearest = np.where(np.isnan(lean), np.nan, angles[np.argmin(np.abs(np.nan_to_num(lean)[:, None] - angles),
                                                                           axis=1)])
         for a in shapes:

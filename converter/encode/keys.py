@@ -128,7 +128,7 @@ def reduce(x: np.ndarray, active: np.ndarray, eps: float | np.ndarray) -> Keys:
     x = np.ascontiguousarray(x, np.float64)
     t, n, d = x.shape
     active = np.ascontiguousarray(active, bool)
-    eps = np.ascontiguousarray(np.broadcast_to(np.asarray(eps, np.float64), (n,)))
+    eps = np.require(np.broadcast_to(np.asarray(eps, np.float64), (n,)), None, ["C", "W"])  # one kernel signature
     mask = np.zeros((t + 1, n), bool)
     values = np.zeros((t + 1, n, d))
     first = np.full(n, -1, np.int64)

@@ -195,7 +195,8 @@ def _candidates(key, owner, box, band, flag, idx, table, shift, nb, out):
                         continue
                     if m == len(out):
                         grown = np.empty((max(2 * m, 16), 2), np.int64)
-                        grown[:m] = out
+                        for r in range(m):  # not grown[:m] = out: its shape check's message took 3 s to compile
+                            grown[r, 0], grown[r, 1] = out[r, 0], out[r, 1]
                         out = grown
                     out[m, 0], out[m, 1] = u, v
                     m += 1
