@@ -4,11 +4,13 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+WARM := $(VENV)/.warm
+KERNELS := $(shell grep -rl --include=*.py numba.njit converter)  # the sources of the compiled kernels
 export PYOPENGL_PLATFORM := egl
 
 .PHONY: setup run convert test test-fast lint golden bench clean
 
-setup: $(STAMP)
+setup: $(WARM)
 	@if command -v npm >/dev/null 2>&1 && ! [ tests/reference/node_modules/.package-lock.json -nt tests/reference/package-lock.json ]; then cd tests/reference && npm ci --no-audit --no-fund --silent; fi
 
 $(STAMP): pyproject.toml
@@ -16,6 +18,12 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
+
+# Compile the kernels once here, not in the first conversion (~20 s); afresh after any change to their sources,
+# since numba's cache does not notice a change to a kernel's callee in another file (converter/warm.py).
+$(WARM): $(STAMP) $(KERNELS)
+	$(BIN)/facesvg warm --fresh --quiet
+	touch $(WARM)
 
 convert: setup
 	mkdir -p out

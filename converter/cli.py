@@ -9,7 +9,7 @@ import sys
 import time
 from pathlib import Path
 
-from converter import formats, framing
+from converter import formats, framing, warm
 from converter.bundled import sample_path
 from converter.convert import convert
 from converter.errors import FacesvgError, InputError
@@ -96,6 +96,12 @@ def cmd_convert(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_warm(args: argparse.Namespace) -> int:
+    """facesvg warm: compile (or load) every kernel now."""
+    print(warm.warm(ProgressBar(not args.quiet and sys.stderr.isatty() or args.progress), args.fresh).summary())
+    return 0
+
+
 def hex_color(rgb: tuple[float, float, float]) -> str:
     """#rrggbb of a display colour 0..1."""
     return "#" + "".join(f"{int(round(min(max(float(c), 0.0), 1.0) * 255)):02x}" for c in rgb)
@@ -160,6 +166,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--animation", help="glTF animation to describe: NAME, INDEX or all (default: the first take)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_info)
+
+    p = sub.add_parser("warm", help="compile the converter's kernels now (a fresh install's first conversion would "
+                                    "spend ~20 s on it); make setup runs it")
+    p.add_argument("--fresh", action="store_true", help="forget the compiled code first and compile it all anew "
+                   "(numba does not notice a change to a kernel's callee in another file)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--progress", action="store_true", help="progress bar even when stderr is not a terminal")
+    p.set_defaults(func=cmd_warm)
 
     # Other subcommands register here (verify, clone, fdp, fap-loa, serve).
     for register in _extra_commands():
