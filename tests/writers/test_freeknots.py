@@ -1,6 +1,7 @@
 """Free-knot keys: the bound holds where active, fewer keys than sampled keys, still tracks stay two equal keys."""
 
 import numpy as np
+import pytest
 
 from converter.encode import freeknots, parallel
 from converter.encode import keys as kf
@@ -73,6 +74,13 @@ def test_the_shape_tried_is_the_one_the_jitter_leans_towards():
     lean = freeknots.lean_deg(x, active)
     assert (lean[:4] > 60).all() and (lean[4:8] < 30).all() and (np.abs(lean[8:12] - 45) < 7.5).all()
     assert np.isnan(lean[12])
+    active[::7, 2] = False  # a block of tracks read from the whole array (one kernel signature) is the same
+    part = freeknots.lean_deg(x, active[:, 2:9], 2)
+    np.testing.assert_array_equal(part, freeknots.lean_deg(np.ascontiguousarray(x[:, 2:9]), active[:, 2:9]))
+    assert part[0] != lean[2]  # the hidden frames count
+    with pytest.raises(ValueError):
+        freeknots.lean_deg(x, active[:, 2:9], 7)  # tracks 7..13 are not all there
+    active[::7, 2] = True
     calls = []
     real = freeknots._reduce_block
     try:
