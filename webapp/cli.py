@@ -79,7 +79,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
 
     # The pipeline (imported at the top) and pyrender load here, so each forked work horse starts warm.
     render._pyrender()
-    warm_converter()  # JIT kernels compiled here are inherited by every work horse (no GL context is made)
+    warm_converter()  # JIT kernels compiled or loaded here are inherited by every work horse
     conn = Redis.from_url(args.queue)
     # RQ's maintenance (every 10 minutes by default) is what fails a job whose worker died after taking it from
     # the queue but before its horse claimed it; the server then records it (RQQueue.get). Run it often.
