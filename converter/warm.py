@@ -74,15 +74,17 @@ def forget() -> int:
     that have since moved to other lines): the number of files removed. numba notices a change to a kernel's own
     file, not to a kernel it calls in another (idpass._frames compiles raster's draw_ids into itself), so after
     such a change the cache must go."""
+    modules = {(k.stats.cache_path, Path(inspect.getfile(k.py_func)).stem) for k in kernels().values()}
     removed = 0
-    for kernel in kernels().values():
-        folder = kernel.stats.cache_path
+    for folder, stem in modules:
         if not folder:
             continue
-        stem = Path(inspect.getfile(kernel.py_func)).stem
         for path in [*Path(folder).glob(f"{stem}.*.nbi"), *Path(folder).glob(f"{stem}.*.nbc")]:
-            path.unlink(missing_ok=True)  # another process may have removed it
-            removed += 1
+            try:
+                path.unlink()
+                removed += 1
+            except FileNotFoundError:  # another process removed it first
+                pass
     return removed
 
 

@@ -308,8 +308,8 @@ def lean_deg(xy: np.ndarray, active: np.ndarray, first: int = 0) -> np.ndarray:
     jitter: atan2 of the summed |second difference| in y and in x over frames active three in a row; NaN for a
     track that never bends. (xy whole and first, not a slice of it: the kernel then sees one array layout.)"""
     n = active.shape[1]
-    if not 0 <= first <= first + n <= xy.shape[1]:
-        raise ValueError(f"tracks {first}..{first + n} are not all in xy's {xy.shape[1]}")
+    if not 0 <= first <= first + n <= xy.shape[1] or active.shape[0] != xy.shape[0]:  # the kernel reads unchecked
+        raise ValueError(f"active {active.shape} from track {first} does not fit xy {xy.shape}")
     ex, ey = np.zeros(n), np.zeros(n)
     _jitter(xy, np.ascontiguousarray(active, np.bool_), first, ex, ey)
     return np.where(ex + ey > 0, np.degrees(np.arctan2(ey, ex)), np.nan)
