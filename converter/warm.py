@@ -69,14 +69,26 @@ def _counts(found: dict[str, CPUDispatcher], which: str) -> dict[str, int]:
     return out
 
 
+def _modules() -> set[tuple[str, str]]:
+    """(cache folder, file stem) of every module that defines kernels (folder '' where numba caches nothing)."""
+    return {(k.stats.cache_path or "", Path(inspect.getfile(k.py_func)).stem) for k in kernels().values()}
+
+
+def stale() -> bool:
+    """Whether cached code may predate a kernel source: an index (.nbi) of the kernels' modules older than the
+    newest of their sources. numba would load it without noticing a change to a callee in another file."""
+    newest = max((os.path.getmtime(inspect.getfile(k.py_func)) for k in kernels().values()), default=0.0)
+    return any(index.stat().st_mtime < newest
+               for folder, stem in _modules() if folder for index in Path(folder).glob(f"{stem}.*.nbi"))
+
+
 def forget() -> int:
     """Delete the cached machine code of the kernels' modules (every signature, and the stale entries of kernels
     that have since moved to other lines): the number of files removed. numba notices a change to a kernel's own
     file, not to a kernel it calls in another (idpass._frames compiles raster's draw_ids into itself), so after
     such a change the cache must go."""
-    modules = {(k.stats.cache_path, Path(inspect.getfile(k.py_func)).stem) for k in kernels().values()}
     removed = 0
-    for folder, stem in modules:
+    for folder, stem in _modules():
         if not folder:
             continue
         for path in [*Path(folder).glob(f"{stem}.*.nbi"), *Path(folder).glob(f"{stem}.*.nbc")]:
@@ -90,9 +102,10 @@ def forget() -> int:
 
 def warm(progress: Progress = no_progress, fresh: bool = False) -> Warmth:
     """Run WARM_JOBS on the bundled sample's first WARM_FRAMES frames, so that numba compiles (or loads) and
-    caches every kernel they call; fresh: forget() the cached code first, so that everything is compiled anew."""
+    caches every kernel they call. With fresh, or when the cache is stale(), forget() it first, so that everything
+    is compiled anew."""
     t = time.perf_counter()
-    if fresh:
+    if fresh or stale():
         forget()
     anim = load(sample_path(), ConversionOptions()).sliced(0, WARM_FRAMES)
     for i, options in enumerate(WARM_JOBS):

@@ -11,12 +11,22 @@ import numpy as np
 import pytest
 from lxml import etree
 
+from converter import warm
+
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = ROOT.parent / "shared" / "data"
 SMALL_DATA = ROOT / "tests" / "data"  # small real files copied from SHARED_DATA by tests/data/derive.py
 SAMPLE = ROOT / "samples" / "face.glb"
+
+
+def pytest_configure(config):
+    """Before any test (and any xdist worker): recompile the kernels if the cache may predate one of their sources.
+    numba does not notice a change to a kernel's callee in another file, so the tests would run the old code;
+    `make test` has done this already (make setup), a bare `pytest` after an edit has not."""
+    if not hasattr(config, "workerinput") and warm.stale():
+        print(f"facesvg: kernel sources changed since they were compiled: {warm.warm(fresh=True).summary()}")
 
 
 def pytest_addoption(parser):

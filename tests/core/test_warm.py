@@ -46,7 +46,7 @@ def _python(code: str, cache: Path) -> str:
 
 
 @pytest.mark.slow
-def test_after_warm_no_conversion_compiles_and_forget_empties_the_cache(tmp_path):
+def test_after_warm_no_conversion_compiles_stale_code_is_seen_and_forget_empties_the_cache(tmp_path):
     cache = tmp_path / "numba"
     warmed = json.loads(_python("import json\nfrom converter import warm\nw = warm.warm()\n"
                                 "print(json.dumps({'compiled': w.compiled, 'loaded': w.loaded}))", cache))
@@ -63,6 +63,12 @@ def test_after_warm_no_conversion_compiles_and_forget_empties_the_cache(tmp_path
     jobs = json.loads(_python(JOBS, cache).splitlines()[-1])
     assert jobs["compiled"] == {}  # flat, Gouraud, player, a still, a simplified mesh: nothing left to compile
     assert len(jobs["loaded"]) >= 20
+
+    stale = "from converter import warm\nprint(warm.stale())"
+    assert _python(stale, cache).strip() == "False"  # compiled after every kernel source was written
+    index = next(cache.rglob("raster.draw_ids-*.nbi"))
+    os.utime(index, (0, 0))  # as if compiled before raster.py last changed: numba itself would not notice
+    assert _python(stale, cache).strip() == "True"
 
     kept = next(cache.rglob("*.nbi")).parent / "not-numba.txt"
     kept.write_text("a file of someone else's")
