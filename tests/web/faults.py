@@ -300,10 +300,13 @@ def second_serve_run(instance: Path, n: int = 20, timeout: float = 420) -> tuple
 class RQWorker:
     """`facesvg worker` on the Redis queue (its work horse is forked per job)."""
 
-    def __init__(self, redis_url: str) -> None:
-        self.proc = subprocess.Popen([sys.executable, "-m", "converter.cli", "worker", "--queue", redis_url],
-                                     cwd=ROOT, env={**os.environ, **FAST_ENV}, stdout=subprocess.DEVNULL,
-                                     stderr=subprocess.DEVNULL)
+    def __init__(self, redis_url: str, log: Path) -> None:
+        # its output goes to log (appended: a replacement worker writes after the one it replaces), kept for the
+        # post-mortem of a run that loses a job
+        with open(log, "ab") as out:
+            self.proc = subprocess.Popen([sys.executable, "-m", "converter.cli", "worker", "--queue", redis_url],
+                                         cwd=ROOT, env={**os.environ, **FAST_ENV}, stdout=out,
+                                         stderr=subprocess.STDOUT)
 
     def horses(self) -> list[int]:
         return [p for p in children(self.proc.pid) if alive(p)]
@@ -324,7 +327,8 @@ def rq_run(instance: Path, redis_url: str, seed: int, n: int = 20, kills: int = 
     out = Outcome()
     t0 = time.monotonic()
     server = Serve(instance, queue=redis_url).wait_up()
-    workers = [RQWorker(redis_url), RQWorker(redis_url)]
+    logs = [instance.parent / f"rq-worker-{i}.log" for i in range(2)]  # beside the instance, which Serve makes
+    workers = [RQWorker(redis_url, log) for log in logs]
     try:
         ids = submit(server.url, n, tag=f"rq{seed}-")
         hit = []
@@ -344,7 +348,8 @@ def rq_run(instance: Path, redis_url: str, seed: int, n: int = 20, kills: int = 
                 while any(alive(p) for p in horses) and time.monotonic() < end:
                     time.sleep(0.05)
                 assert not any(alive(p) for p in horses), "a work horse outlived its worker"
-                workers[workers.index(victim)] = RQWorker(redis_url)
+                slot = workers.index(victim)
+                workers[slot] = RQWorker(redis_url, logs[slot])
                 out.restarts += 1
         states = settle_all(lambda: server.url, ids, timeout)
         out.recovery += recovery_times(hit, states)

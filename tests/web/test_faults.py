@@ -40,6 +40,7 @@ def test_second_serve_on_the_same_folder_exits_and_touches_nothing(tmp_path):
 @pytest.mark.parametrize("seed", [1])
 def test_killed_rq_workers_lose_nothing(tmp_path, redis_url, seed):
     out = rq_run(tmp_path / "inst", redis_url, seed, n=20, kills=2)
+    logs = f"{out}; the RQ workers' logs: {tmp_path}/rq-worker-*.log"
     assert out.jobs == 20 and sum(out.kills.values()) == 2
-    assert (out.lost, out.duplicated, out.deleted, out.invalid) == (0, 0, 0, 0), out
-    assert out.done >= 18, out
+    assert (out.lost, out.duplicated, out.deleted, out.invalid) == (0, 0, 0, 0), logs
+    assert out.done >= 18, logs
