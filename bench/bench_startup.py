@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import resource
 import shutil
 import statistics
 import subprocess
@@ -19,8 +18,13 @@ import tempfile
 import time
 from pathlib import Path
 
-TITLE = "Start-up: a fresh install's first conversion, and small jobs after `facesvg warm` (issue 16)"
 ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from bench import usage
+
+TITLE = "Start-up: a fresh install's first conversion, and small jobs after `facesvg warm` (issue 16)"
 REPEATS = 3
 TINY = ["convert", "--sample", "--end", "10", "-q"]  # the bundled sample's first 10 frames
 SMALL = ["convert", "--sample", "-q"]  # all 121 frames of it
@@ -43,8 +47,7 @@ def child(args: list[str]) -> dict:
             os.chdir(tmp)  # convert --sample writes face.svg here
             if cli.main(args):
                 raise SystemExit(f"facesvg {' '.join(args)} failed")
-    r = resource.getrusage(resource.RUSAGE_SELF)
-    return {"cpu": r.ru_utime + r.ru_stime, "peak_mb": r.ru_maxrss / 1024}
+    return {"cpu": usage.cpu(), "peak_mb": usage.peak_mb()}
 
 
 def measure(args: list[str] | None, warm: bool, cache: Path) -> dict:
@@ -80,7 +83,7 @@ def run() -> str:
         "empty for a fresh install, else a copy of one that `facesvg warm` filled. `make setup` runs `facesvg warm` "
         "(and again, `--fresh`, whenever a kernel's source changes), so `make run`'s conversion and every later "
         "one start warm; a `pip install` user runs it once (README). CPU is user+sys of the process and its "
-        "threads; peak is its ru_maxrss.",
+        "threads (and any child it waits for); peak is its ru_maxrss (`bench/usage.py`).",
         "",
         *rows,
         "",
@@ -94,7 +97,6 @@ def run() -> str:
 
 if __name__ == "__main__":
     if len(sys.argv) > 2 and sys.argv[1] == "child":
-        sys.path.insert(0, str(ROOT))
         print(json.dumps(child(json.loads(sys.argv[2]))))
     else:
         print(run())
