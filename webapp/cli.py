@@ -74,6 +74,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
     """Work the facesvg RQ queue until stopped (or until empty with --burst)."""
     if not args.queue or not args.queue.startswith(("redis://", "rediss://", "unix://")):
         raise InputError("give the Redis URL with --queue redis://host:port/0 (or set FACESVG_QUEUE).")
+    every = maintenance_seconds()
     from redis import Redis  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
     from rq import Queue, Worker  # noqa: PLC0415 - the Redis backend is optional; loaded only when configured
 
@@ -82,7 +83,23 @@ def cmd_worker(args: argparse.Namespace) -> int:
     warm_converter()  # JIT kernels compiled or loaded here are inherited by every work horse
     conn = Redis.from_url(args.queue)
     # RQ's maintenance (every 10 minutes by default) is what fails a job whose worker died after taking it from
-    # the queue but before its horse claimed it; the server then records it (RQQueue.get). Run it often.
-    Worker([Queue("facesvg", connection=conn)], connection=conn,
-           maintenance_interval=RQ_MAINTENANCE_SECONDS).work(burst=args.burst)
+    # the queue but before its horse claimed it; the server then re-queues it (RQQueue.get). Run it often, idle
+    # too: an idle worker waits for work worker_ttl - 15 s at a time (405 s by default) and only between those
+    # waits does it run maintenance, so such a job sat queued ~7 minutes once the queue had drained.
+    Worker([Queue("facesvg", connection=conn)], connection=conn, maintenance_interval=every,
+           worker_ttl=every + 15).work(burst=args.burst)
     return 0
+
+
+def maintenance_seconds() -> int:
+    """Seconds between an RQ worker's maintenance runs: FACESVG_RQ_MAINTENANCE_SECONDS, else RQ_MAINTENANCE_SECONDS."""
+    raw = os.environ.get("FACESVG_RQ_MAINTENANCE_SECONDS", "").strip()
+    if not raw:
+        return RQ_MAINTENANCE_SECONDS
+    try:
+        value = int(raw)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= 3600:
+        raise InputError(f"FACESVG_RQ_MAINTENANCE_SECONDS={raw!r}: give whole seconds from 1 to 3600.")
+    return value

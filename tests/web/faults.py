@@ -300,12 +300,12 @@ def second_serve_run(instance: Path, n: int = 20, timeout: float = 420) -> tuple
 class RQWorker:
     """`facesvg worker` on the Redis queue (its work horse is forked per job)."""
 
-    def __init__(self, redis_url: str, log: Path) -> None:
+    def __init__(self, redis_url: str, log: Path, env: dict | None = None) -> None:
         # its output goes to log (appended: a replacement worker writes after the one it replaces), kept for the
         # post-mortem of a run that loses a job
         with open(log, "ab") as out:
             self.proc = subprocess.Popen([sys.executable, "-m", "converter.cli", "worker", "--queue", redis_url],
-                                         cwd=ROOT, env={**os.environ, **FAST_ENV}, stdout=out,
+                                         cwd=ROOT, env={**os.environ, **FAST_ENV, **(env or {})}, stdout=out,
                                          stderr=subprocess.STDOUT)
 
     def horses(self) -> list[int]:

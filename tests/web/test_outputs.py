@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import os
 import re
 import subprocess
 import sys
@@ -55,3 +56,9 @@ def test_cli_registers_serve_and_worker():
     out = subprocess.run([sys.executable, "-m", "converter.cli", "worker", "--queue", "embedded"],
                          capture_output=True, text=True, cwd=Path(ROOT))
     assert out.returncode == 2 and "redis://" in out.stderr and "Traceback" not in out.stderr
+    for bad in ("0", "ten", "1e9"):  # refused before it loads anything or connects
+        out = subprocess.run([sys.executable, "-m", "converter.cli", "worker", "--queue", "redis://127.0.0.1:9/0"],
+                             capture_output=True, text=True, cwd=Path(ROOT),
+                             env={**os.environ, "FACESVG_RQ_MAINTENANCE_SECONDS": bad})
+        assert out.returncode == 2 and "FACESVG_RQ_MAINTENANCE_SECONDS" in out.stderr, out.stderr
+        assert "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1, out.stderr
