@@ -56,6 +56,7 @@ def test_rq_job_its_dead_worker_took_but_never_started_is_recovered_while_worker
     import redis
     from rq import Queue
 
+    redis_url = redis_url.rsplit("/", 1)[0] + "/7"  # a database of its own: no other test's worker takes the job
     conn = redis.Redis.from_url(redis_url)
     conn.flushdb()
     server = Serve(tmp_path / "inst", queue=redis_url).wait_up()
