@@ -24,6 +24,7 @@ class ProgressBar:
     def __init__(self, enabled: bool) -> None:
         self.enabled = enabled
         self.last = -1.0
+        self.stage = ""
         self.start: float | None = None
 
     def __call__(self, stage: str, fraction: float) -> None:
@@ -31,9 +32,9 @@ class ProgressBar:
             return
         now = time.monotonic()
         self.start = now if self.start is None else self.start
-        if fraction < 1.0 and now - self.last < 0.1:
+        if fraction < 1.0 and now - self.last < 0.1 and stage == self.stage:  # a new stage shows at once
             return
-        self.last = now
+        self.last, self.stage = now, stage
         filled = int(round(fraction * 30))
         left = seconds_left(now - self.start, fraction) if fraction < 1.0 else None
         eta = f"ETA {int(left) // 60}:{int(left) % 60:02d}" if left is not None and now - self.start > 1.0 else ""

@@ -47,6 +47,19 @@ def no_progress(stage: str, fraction: float) -> None:
     """A progress callback that ignores everything."""
 
 
+def span(progress: Progress, start: float, end: float, stage: str | None = None) -> Progress:
+    """A callback for one part of a job that maps its own 0..1 onto start..end of progress (renamed to stage when
+    given): a part reports its own fraction without knowing its share of the whole."""
+    if progress is no_progress:
+        return no_progress
+    width = end - start
+
+    def part(name: str, fraction: float) -> None:
+        progress(stage or name, start + width * min(max(fraction, 0.0), 1.0))
+
+    return part
+
+
 def seconds_left(elapsed: float, fraction: float, min_fraction: float = 0.05) -> float | None:
     """Seconds a job still needs, extrapolating its progress so far; None until it has done min_fraction."""
     if fraction < min_fraction:

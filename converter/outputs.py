@@ -11,10 +11,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from converter.errors import InputError
-from converter.options import ConversionOptions, OptionField, Report
+from converter.options import ConversionOptions, OptionField, Progress, Report
 from converter.writers import fap2d, player, svg_anim, svg_gouraud
 
-Writer = Callable[[Any, ConversionOptions, Report], bytes]
+Writer = Callable[[Any, ConversionOptions, Report, Progress], bytes]  # (2D data, options, report, progress)
 """(what the stage built: a Sheet or a Fat2dSheet, options, report) -> the output's bytes."""
 
 SHEET = "sheet"  # converter.extract: projected, culled, shaded frames (converter.sheet.Sheet)

@@ -23,6 +23,7 @@ import numpy as np
 
 from converter.arrays import lexsort_ints
 from converter.encode.keys import Keys
+from converter.options import Progress, no_progress
 
 FOLD_CELLS = 1 << 19  # path-frames folded at a time
 
@@ -77,15 +78,19 @@ def fold(keys: Keys, active: np.ndarray) -> Timeline:
     return fold_blocks(active, lambda a, b: Keys(keys.mask[:, a:b], keys.values[:, a:b], keys.first_active[a:b]))
 
 
-def fold_blocks(active: np.ndarray, keys_of: Callable[[int, int], Keys], size: int | None = None) -> Timeline:
+def fold_blocks(active: np.ndarray, keys_of: Callable[[int, int], Keys], size: int | None = None,
+                progress: Progress = no_progress) -> Timeline:
     """fold of the keys that keys_of(a, b) gives for paths a..b-1 (active (T, P)), asked for a block of size
-    paths at a time (at most FOLD_CELLS path-frames): the keys of every path never exist at once."""
+    paths at a time (at most FOLD_CELLS path-frames): the keys of every path never exist at once.
+    progress("keys", fraction of the paths done) before each block."""
     t, p = active.shape
     block = max(1, min(FOLD_CELLS // max(t, 1), size or p))
     if p <= block:
+        progress("keys", 0.0)
         return _fold(keys_of(0, p), active)
     fields: list[list[np.ndarray]] = [[] for _ in Timeline._fields]
     for a in range(0, p, block):
+        progress("keys", a / p)
         part = _fold(keys_of(a, min(a + block, p)), active[:, a:a + block])
         for out, x in zip(fields, part._replace(path=part.path + a)):
             out.append(x)

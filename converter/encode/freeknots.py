@@ -24,6 +24,7 @@ import numba
 import numpy as np
 
 from converter.encode import keys, parallel
+from converter.options import Progress, no_progress, span
 
 BIG = 1e7  # bound of the unconstrained first value and of every velocity (px, px/frame)
 MAX_VERTS = 40  # polygon capacity; a segment whose polygon would outgrow it is cut early (still valid)
@@ -336,7 +337,7 @@ def _jitter(xy, active, first, ex, ey) -> None:
 
 def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
                shapes: tuple[float, ...] | None = None, best: keys.Keys | None = None,
-               exhaustive: bool = False) -> keys.Keys:
+               exhaustive: bool = False, progress: Progress = no_progress) -> keys.Keys:
     """Free-knot keys for tracks of 2D points xy (T, N, 2m), each point within Euclidean radius where active;
     with best, per track whichever of best and the shapes' keys has fewest (best on ties; best's arrays are
     updated in place and returned). The values are stored as float32 (dense over T + 1 frames, they are the
@@ -346,17 +347,22 @@ def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
     Without best the first shape is reduced for every track. Unless exhaustive, a track then tries only the
     further shape nearest the lean of its jitter (``lean_deg``; the rectangle on its side of the square), and none
     when it never bends: on the capture-like face that keeps 98 % of the keys trying every shape on every track
-    saves (95 % at 1 px), for half its CPU."""
+    saves (95 % at 1 px), for half its CPU.
+
+    progress("keys", fraction of the work done) before each block of tracks (without best, the first shape's
+    pass counts as half of it)."""
     shapes = SHAPES_DEG if shapes is None else shapes
     t, n = xy.shape[:2]
     m = xy.shape[2] // 2
     r = np.broadcast_to(np.asarray(radius, np.float64), (n,))
     if best is None:
-        best, _ = shape_keys(xy, active, r, shapes[0])
+        best, _ = shape_keys(xy, active, r, shapes[0], progress=span(progress, 0.0, 0.5))
         shapes = shapes[1:]
+        progress = span(progress, 0.5, 1.0)
     angles = np.array(shapes, np.float64)
     size = block_tracks(t)
     for b in range(0, n, size):  # blocks of tracks: the dense keys and the lean stay small
+        progress("keys", b / max(n, 1))
         sl = slice(b, b + size)
         nearest = None
         if not exhaustive and len(shapes) > 1:
@@ -376,10 +382,11 @@ def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
 
 
 def shape_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray, deg: float,
-               limit: np.ndarray | None = None) -> tuple[keys.Keys, np.ndarray]:
+               limit: np.ndarray | None = None, progress: Progress = no_progress) -> tuple[keys.Keys, np.ndarray]:
     """Free-knot keys for tracks of 2D points xy (T, N, 2m) within the rectangle of angle deg inscribed in each
     point's circle of radius where active (values float32, as point_keys'). With limit (N,), a track gives up
-    (gave_up (N,) True, no keys) once it cannot end with fewer than limit keys."""
+    (gave_up (N,) True, no keys) once it cannot end with fewer than limit keys. progress("keys", fraction of the
+    tracks done) before each block."""
     t, n = xy.shape[:2]
     m = xy.shape[2] // 2
     r = np.broadcast_to(np.asarray(radius, np.float64), (n,))
@@ -388,6 +395,7 @@ def shape_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray, d
     gave_up = np.zeros(n, bool)
     size = block_tracks(t)
     for b in range(0, n, size):  # blocks of tracks: the dense keys stay small
+        progress("keys", b / max(n, 1))
         sl = slice(b, b + size)
         k, gave_up[sl] = _reduce_block(xy, active[:, sl], r[sl], None if limit is None else limit[sl],
                                        _scale(deg, m), np.arange(b, min(b + size, n)), np.float32)

@@ -59,6 +59,7 @@ from converter.encode.order import greedy_order
 from converter.encode.overlap import overlap_pairs
 from converter.encode.robust_affine import fit_affine
 from converter.encode.tracks import Tracks, blocks
+from converter.options import Progress, no_progress, span
 
 HEAD_CLUSTERS = 24  # motion clusters of the largest band (the head)
 CLUSTER_MIN_TRIANGLES = 50  # fewer clusters on small heads: at least this many triangles each
@@ -78,6 +79,8 @@ BAND_SHARE = 0.3  # the same for each band's transform inside the head's (smooth
 EVERY_FRAME_SHARE = 0.8  # when keyframing keeps more frames than this share, write every frame (no keyTimes)
 PLAIN_SAMPLE = 4  # the plain key count that decides whether groups pay is estimated on every 16th path, then
 PLAIN_MARGIN = 0.25  # on every 4th when the first estimate is within this share of the grouped cost
+PLAN_SHARES = (0.3, 0.75)  # where plan's layout ends and its decision ends, as fractions of its time (wall, the
+# capture-like face, 8k x 1,000 and the ICT head x 1,000: layout 0.25-0.37, decision 0.40-0.48, refining 0.23-0.27)
 TIME_DECIMALS = 4  # keyTimes of the transform animations are played (and so written) rounded to these decimals
 
 
@@ -411,9 +414,11 @@ def reorder(band: np.ndarray, pairs: np.ndarray) -> np.ndarray:
 # --- layout and plan --------------------------------------------------------------------------------------------
 def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int,
            tris: np.ndarray, active: np.ndarray, budget: ErrorBudget, kt_decimals: int = TIME_DECIMALS,
-           head_clusters: int = HEAD_CLUSTERS, merge_runs: bool = True) -> Layout:
+           head_clusters: int = HEAD_CLUSTERS, merge_runs: bool = True,
+           progress: Progress = no_progress) -> Layout:
     """Head motion, bands, played transforms, run order and local tracks for paths tris (P,) shown where
-    active (T, P).
+    active (T, P). progress(stage, fraction of the layout done) between its steps (shares measured on the ICT
+    head x 1,000 and the capture-like face: the overlap search is about half of it).
 
     xy (T, V, 2) px comes from the Sheet; budget.tolerance px is the global bound the residual encoder works to
     (the transforms take HEAD_SHARE and BAND_SHARE of it as fitting slack, not as error). The head's transform is
@@ -424,7 +429,9 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
     tolerance, scale = budget.tolerance, budget.scale
     xy64 = xy.astype(np.float64)
     small = max(SMALL_BAND_TRIANGLES, int(SMALL_BAND_SHARE * len(faces)))
+    progress("motion", 0.0)
     merged = merge_by_motion(components(faces, part_ids), faces, xy64, neutral, MERGE_PX, small)
+    progress("motion", 0.12)
     ids, sizes = np.unique(merged, return_counts=True)
     head = _motion(xy64, unique_ints(faces[merged == ids[np.argmax(sizes)]]), neutral, HEAD_SHARE * tolerance,
                    scale, kt_decimals)
@@ -439,15 +446,19 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
         in_head[sl] -= head.matrices[sl, None, :, 2]
         in_head[sl] = apply_linear(inv[sl], in_head[sl], out=buf[:sl.stop - sl.start])
     del buf
+    progress("motion", 0.25)
     band_of_tri = motion_clusters(merged, faces, in_head, neutral, head_clusters)
     band_ids, band = np.unique(band_of_tri[tris], return_inverse=True)
+    progress("motion", 0.42)
     motions = _motions(in_head, [unique_ints(faces[band_of_tri == b]) for b in band_ids.tolist()], neutral,
                        BAND_SHARE * tolerance, scale, kt_decimals)
+    progress("motion", 0.5)
     # Stored as float32: ~1e-5 px at these magnitudes (budget.float_err), half the plan's largest array.
     in_head = in_head.astype(np.float32)
     order = np.arange(len(tris))
     if merge_runs and len(tris) > 1:
-        order = reorder(band, overlap_pairs(xy, active, band=band, corners=faces[tris], drift=head.matrices[:, :, 2]))
+        order = reorder(band, overlap_pairs(xy, active, band=band, corners=faces[tris], drift=head.matrices[:, :, 2],
+                                            progress=span(progress, 0.5, 0.98)))
     band = band[order]
     gains = np.zeros(len(band_ids))
     for b, m in enumerate(motions):
@@ -486,7 +497,7 @@ def _motions(xy: np.ndarray, vert_sets: list[np.ndarray], neutral: int, slack: f
 
 def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, tris: np.ndarray,
          active: np.ndarray, budget: ErrorBudget, costs: Costs, head_clusters: int = HEAD_CLUSTERS,
-         merge_runs: bool = True) -> Plan:
+         merge_runs: bool = True, progress: Progress = no_progress) -> Plan:
     """Rigid layout for the bounded encoder: the head group around everything, which runs of paths go under a
     band's group inside it, and their tracks.
 
@@ -496,10 +507,14 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     Band-local tracks and keys are worked out a block of runs at a time and kept only where they win, so the
     plan holds one track and one set of keys per path: the tracks once per vertex (encode.tracks), the square
     keys packed (keys.Packed) until the other shapes refine them and collapse folds them, a block of paths at a
-    time, into the timeline the writer keys from."""
+    time, into the timeline the writer keys from.
+
+    progress(stage, fraction of the plan done): the layout, the decision's blocks of runs and the refining's blocks
+    of paths take about PLAN_SHARES of it."""
     t, p = active.shape
     lay = layout(xy, faces, part_ids, neutral, tris, active, budget, head_clusters=head_clusters,
-                 merge_runs=merge_runs)
+                 merge_runs=merge_runs, progress=span(progress, 0.0, PLAN_SHARES[0]))
+    decided = span(progress, PLAN_SHARES[0], PLAN_SHARES[1], "groups")
     act = np.take(active, lay.order, axis=1)
     global_radius = budget.keys
     r_local = budget.local_keys(lay.gain)
@@ -543,6 +558,7 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     wrapped = np.zeros(p, bool)
     for block in _run_blocks([(a, b) for a, b in runs if b > a], size):
         lo, hi = block[0][0], block[-1][1]
+        decided("groups", lo / p)
         cand = [(a, b) for a, b in block if ok[a]]
         limit = np.full(hi - lo, NO_LIMIT, np.int64)
         kl = None
@@ -614,8 +630,8 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
         return k._replace(values=k.values[..., :6])
 
     heap.give_back()  # the decision's blocks of tracks and dense keys, before the refining's
-    timeline = collapse.fold_blocks(act, best_keys, max(16, size // 4))  # small blocks: their refining
-    # temporaries (dense keys, jitter) come on top of every path's tracks and keys
+    # small blocks: their refining temporaries (dense keys, jitter) come on top of every path's tracks and keys
+    timeline = collapse.fold_blocks(act, best_keys, max(16, size // 4), span(progress, PLAN_SHARES[1], 1.0))
     return Plan(lay.order, track, radius, np.array(wrapped_runs, np.int64).reshape(-1, 2), band, gain,
                 lay.motions, stats, timeline, lay.head)
 

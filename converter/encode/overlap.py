@@ -14,6 +14,7 @@ import numpy as np
 
 from converter.arrays import lexsort_ints
 from converter.encode import parallel
+from converter.options import Progress, no_progress
 
 # Frames per candidate-search block: a block's boxes hold its frames' motion, so the best block is about as many
 # frames as a triangle takes to move its own size (any size finds the same pairs; the exact test decides per frame).
@@ -415,7 +416,8 @@ def _per_frame(drift: np.ndarray, ndim: int) -> np.ndarray:
 
 def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = None,
                   margin: float = STROKE_MARGIN_PX, band: np.ndarray | None = None,
-                  corners: np.ndarray | None = None, drift: np.ndarray | None = None) -> np.ndarray:
+                  corners: np.ndarray | None = None, drift: np.ndarray | None = None,
+                  progress: Progress = no_progress) -> np.ndarray:
     """(E, 2) path pairs i < j that may come within margin px of each other in a frame where both are drawn.
     xy_paths (T, P, 3, 2) px, or with corners (P, 3) vertex ids into xy_paths (T, V, 2), gathered a block of
     frames at a time (no (T, P, 3, 2) copy).
@@ -432,7 +434,9 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = 
     drift (T, 2) px, optional: a translation per frame (the head's) taken off before the candidate search. A
     translation moves every box of a frame alike, so the same pairs come out; what the paths do besides it is
     slower, so a block spans more frames for the same box sizes (on the 128k-triangle bench face the head's
-    translation halves the median step: 5 frames a block where the screen allows 2)."""
+    translation halves the median step: 5 frames a block where the screen allows 2).
+
+    progress("overlap", fraction of the frames searched) after each block."""
     t, p = active.shape
     block = block_frames(xy_paths, corners, drift) if block is None else block
     xy32 = xy_paths if corners is not None else np.asarray(xy_paths, np.float32)
@@ -456,6 +460,7 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = 
     found = PairSet(p)
     buffer = np.empty((p, 2), np.int64)  # _candidates' pairs, reused (and grown) block to block
     for k0 in range(0, t, block):
+        progress("overlap", k0 / t)
         act = np.take(active[k0:k0 + block], order, axis=1)
         idx = np.flatnonzero(act.any(axis=0))
         if len(idx) < 2:

@@ -20,7 +20,7 @@ import numpy as np
 from PIL import Image
 
 from converter.mpeg4.fat2d import Fat2dSheet
-from converter.options import ConversionOptions, Report
+from converter.options import ConversionOptions, Progress, Report, no_progress
 
 FORMAT = "facesvg-fap2d"
 VERSION = "1.0"
@@ -153,8 +153,10 @@ def animation_sizes(pkg: Package) -> dict[str, float]:
     }
 
 
-def write(sheet: Fat2dSheet, options: ConversionOptions, report: Report) -> bytes:
-    """The package of a Fat2dSheet as zip bytes; sizes of its files and of the stream go into the report."""
+def write(sheet: Fat2dSheet, options: ConversionOptions, report: Report, progress: Progress = no_progress) -> bytes:
+    """The package of a Fat2dSheet as zip bytes; sizes of its files and of the stream go into the report (fast:
+    progress hears only its start)."""
+    progress("package", 0.0)
     pkg = package(sheet)
     data = package_zip(pkg)
     report.sizes.update({name: len(b) for name, b in pkg.files.items()})

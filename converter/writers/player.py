@@ -47,7 +47,7 @@ from converter.encode import keys as keyframes
 from converter.encode.budget import ErrorBudget
 from converter.encode.order import draw_list
 from converter.errors import InputError
-from converter.options import ConversionOptions, Report
+from converter.options import ConversionOptions, Progress, Report, no_progress, span
 from converter.sheet import Sheet
 from converter.writers import svg_anim
 from converter.writers.metadata import source_fields
@@ -166,17 +166,19 @@ def _head(sheet: Sheet, tris: np.ndarray, local: np.ndarray, xy: np.ndarray,
 
 
 def _position_keys(sheet: Sheet, tris: np.ndarray, verts: np.ndarray, local: np.ndarray, vact: np.ndarray,
-                   budget: ErrorBudget, rigid: bool) -> tuple[keyframes.Keys, np.ndarray | None]:
+                   budget: ErrorBudget, rigid: bool,
+                   progress: Progress = no_progress) -> tuple[keyframes.Keys, np.ndarray | None]:
     """Per-vertex keys in px, or (with rigid) local to the head transform (_head) when that saves more key bytes
-    than the transform costs; the transforms (T + 1, 2, 3) float32 or None."""
+    than the transform costs; the transforms (T + 1, 2, 3) float32 or None. progress(stage, fraction done)."""
     xy = np.take(sheet.xy, verts, axis=1).astype(np.float64)
     # Keys sit on integer frames (nothing to round in time): the keyTimes share is the keyframes' too.
-    plain = freeknots.point_keys(xy, vact, budget.tolerance - budget.rounding - budget.float_err)
+    plain = freeknots.point_keys(xy, vact, budget.tolerance - budget.rounding - budget.float_err,
+                                 progress=span(progress, 0.0, 0.45))
     head = _head(sheet, tris, local, xy, budget) if rigid else None
     if head is None or head[2] <= 0.1 * budget.keys:
         return plain, None
     mats, local_xy, radius = head
-    keys = freeknots.point_keys(local_xy, vact, radius)
+    keys = freeknots.point_keys(local_xy, vact, radius, progress=span(progress, 0.55, 1.0))
     if (plain.mask.sum() - keys.mask.sum()) * BYTES_PER_KEY <= mats.nbytes:
         return plain, None
     return keys, mats
@@ -189,29 +191,33 @@ def _section(a: np.ndarray) -> bytes:
     return planes + b"\0" * (-len(planes) % 4)
 
 
-def encode(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
-    """The binary block (header + sections, not yet deflated) of the sheet's animation."""
+def encode(sheet: Sheet, options: ConversionOptions, report: Report, progress: Progress = no_progress) -> bytes:
+    """The binary block (header + sections, not yet deflated) of the sheet's animation; progress(stage, fraction of
+    the writing done) between its steps."""
     t = sheet.n_frames
     if t > MAX_FRAMES:
         raise InputError(f"the player holds at most {MAX_FRAMES} frames, got {t}; convert a shorter range "
                          "(--start/--end).")
+    progress("order", 0.0)
     dl = draw_list(sheet, layers=options.depth_layers)
     shown_any = dl.active.any(axis=0)
     tris, active = dl.triangles[shown_any].astype(np.int64), np.compress(shown_any, dl.active, axis=1)
     p = len(tris)
+    progress("keys", 0.05)
     corners = sheet.faces[tris].astype(np.int64)
     verts, local = np.unique(corners, return_inverse=True)
     local = local.reshape(p, 3)
     n_v = len(verts)
     vact = _vertex_active(active, local, n_v)
     budget = ErrorBudget.split(options.tolerance, max(sheet.camera.width, sheet.camera.height))
-    pos, mats = _position_keys(sheet, tris, verts, local, vact, budget, options.rigid)
+    pos, mats = _position_keys(sheet, tris, verts, local, vact, budget, options.rigid, span(progress, 0.05, 0.45))
     q = pos._replace(values=np.rint(np.multiply(pos.values, budget.scale, dtype=np.float64)))
     pc, pf, pv = _pack_keys(q.mask, q.values)
     wide = bool(len(pv)) and (pv.min() < -32768 or pv.max() > 32767)
     gouraud = options.shading != "flat"
     rgb, cact = ((np.take(sheet.vertex_rgb, verts, axis=1), vact) if gouraud
                   else (np.take(sheet.face_rgb, tris, axis=1), active))
+    progress("colours", 0.45)
     cc, cf, cv = _color_keys(rgb, cact)
     vis0, vc, vf = _changes(active)
     sections = [
@@ -253,11 +259,12 @@ def _json_text(doc: dict) -> str:
     return json.dumps(doc, sort_keys=True, separators=(",", ":")).replace("<", "\\u003c")
 
 
-def write(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
+def write(sheet: Sheet, options: ConversionOptions, report: Report, progress: Progress = no_progress) -> bytes:
     """The player HTML: the deflated block in base64, the metadata and the inlined player script."""
     if options.frame is not None:
         raise InputError("--frame makes a still, which the player does not; drop --frame or use --to svg.")
-    block = encode(sheet, options, report)
+    block = encode(sheet, options, report, progress)
+    progress("deflate", 0.6)  # zlib at level 9 took 40 % of the writing on the capture-like face
     packed = zlib.compress(block, 9)
     report.sizes["player_deflated"] = len(packed)
     scale = HEADER.unpack_from(block)[7]

@@ -42,7 +42,7 @@ from converter.encode.budget import ErrorBudget, viewbox_scale
 from converter.encode.order import draw_list
 from converter.encode.tracks import Tracks
 from converter.errors import InputError
-from converter.options import ConversionOptions, Report
+from converter.options import ConversionOptions, Progress, Report, no_progress, span
 from converter.sheet import Sheet
 from converter.writers import svgtext
 from converter.writers.metadata import source_fields
@@ -58,6 +58,8 @@ UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples 
 KEY_TEXT_KEYS = 1 << 15  # keys whose d and keyTimes texts exist at once (a block of paths)
 RAW_COUNT_CELLS = 1 << 17  # vertex-frames per block when counting the raw encoding's bytes (~10 MB of temporaries)
 RAW_WRITE_PATHS = 128  # paths per block when writing it (its one format call holds 18 objects per tri-frame)
+KEYS_DONE = 0.78  # progress of the writing when the keys are done and the text starts (wall time: the text took
+# 20-22 % of the writer on the capture-like face, 8k x 1,000 and the ICT head x 1,000)
 
 
 def _hex(levels: np.ndarray) -> np.ndarray:
@@ -91,11 +93,11 @@ def metadata(sheet: Sheet, options: ConversionOptions, report: Report, extra: di
     return f'<metadata id="facesvg">{escape(json.dumps(doc, sort_keys=True, separators=(",", ":")))}</metadata>'
 
 
-def write(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
+def write(sheet: Sheet, options: ConversionOptions, report: Report, progress: Progress = no_progress) -> bytes:
     """The animated SVG (raw when options.raw, else error-bounded), or the still of options.frame."""
     if options.frame is not None:
         return write_still(sheet, options, report, options.frame)
-    return encode(sheet, options, report, "raw" if options.raw else "bounded")
+    return encode(sheet, options, report, "raw" if options.raw else "bounded", progress)
 
 
 def path_ids(tris: np.ndarray) -> list[str]:
@@ -278,9 +280,12 @@ def _discrete(attribute: str, codes: np.ndarray, names: list[str], kt: list[str]
     return out
 
 
-def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str = "bounded") -> bytes:
-    """The animated SVG in one of the encodings: 'raw', 'chapter' or 'bounded' (module docstring)."""
+def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str = "bounded",
+           progress: Progress = no_progress) -> bytes:
+    """The animated SVG in one of the encodings: 'raw', 'chapter' or 'bounded' (module docstring); progress(stage,
+    fraction of the writing done) as it goes (the keys up to KEYS_DONE, then the text)."""
     t = sheet.n_frames
+    progress("order", 0.0)
     dl = draw_list(sheet, layers=options.depth_layers)
     tris, active = dl.triangles, dl.active
     shown = active.any(axis=0)  # a path never shown is dropped
@@ -292,29 +297,33 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
         report.sizes["raw_d_values"] = raw_values_bytes(sheet.xy, sheet.faces[tris])
     budget = ErrorBudget.split(options.tolerance, max(sheet.camera.width, sheet.camera.height))
     plan = None
+    keys_from = 0.02  # progress of the writing where the plain keys start, when they are worked out
     if mode == "bounded" and options.rigid and p:
         costs = groups.Costs(lambda m: len(group_open(m, t, dur)), len(CLOSE), BYTES_PER_KEY)
-        plan = groups.plan(sheet.xy, sheet.faces, sheet.part_ids, sheet.neutral, tris, active, budget, costs)
+        plan = groups.plan(sheet.xy, sheet.faces, sheet.part_ids, sheet.neutral, tris, active, budget, costs,
+                           progress=span(progress, 0.02, KEYS_DONE))
         heap.give_back()  # the plan's temporaries, before the text's
         if plan.head is not None:  # else nothing pays for a group: the plain encoding, byte for byte
             tris, active, track = tris[plan.order], np.take(active, plan.order, axis=1), plan.track
-        else:
+        else:  # the plan stopped before its refining: the plain keys take that part of the progress
             plan = None
+            keys_from = 0.02 + (KEYS_DONE - 0.02) * groups.PLAN_SHARES[1]
     if plan is None:  # the Sheet's float32 vertices, read a block of paths at a time
         track = Tracks.screen(sheet.xy, sheet.faces[tris])
     joined = None
     if mode == "bounded" and options.max_animations is not None and p > options.max_animations:
         joined, tris, active, track, plan = _merge_plan(sheet, tris, active, track, plan, options)
     if mode in ("raw", "chapter"):
-        body = _encode_raw(sheet, tris, active, track, dur, chapter=mode == "chapter")
+        body = _encode_raw(sheet, tris, active, track, dur, chapter=mode == "chapter",
+                           progress=span(progress, 0.02, 1.0))
         scale = 1
     else:
-        owned = [track, _timeline(track, active, budget, plan)]
+        owned = [track, _timeline(track, active, budget, plan, span(progress, keys_from, KEYS_DONE))]
         del track  # _encode_keyed lets the track go once the geometry is written
         if plan is not None:  # its keys live on only in the timeline, its track in owned
             plan = plan._replace(timeline=None, track=None)
         body, scale, enc = _encode_keyed(sheet, budget, tris, active, owned, dur, report, plan,
-                                         options.color_tolerance, joined)
+                                         options.color_tolerance, joined, span(progress, KEYS_DONE, 1.0, "text"))
         extra["encoding"].update(enc)
     head = [_header(sheet, scale), metadata(sheet, options, report, extra, order=tris),
             f"<title>{escape(sheet.name)}</title>"]
@@ -451,7 +460,7 @@ def raw_values_bytes(xy: np.ndarray, corners: np.ndarray) -> int:
 
 
 def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: Tracks, dur: str,
-                chapter: bool = False) -> list[bytes]:
+                chapter: bool = False, progress: Progress = no_progress) -> list[bytes]:
     """The raw file: every frame's coordinates (2 decimals) as evenly spaced values (frame k at k/T, the last
     held to T); fill, stroke and display as discrete animations where they change. With chapter=True the
     chapter's post-optimisations: coordinates only at frames that need them (nothing while hidden, a still
@@ -464,6 +473,7 @@ def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: Track
     out = [b'<g stroke-width="0.5" stroke-linejoin="round">']
     ids = path_ids(tris)
     for a in range(0, p, RAW_WRITE_PATHS):
+        progress("text", a / p)
         sl = slice(a, a + RAW_WRITE_PATHS)
         lines = _raw_block(np.take(sheet.face_rgb, tris[sl], axis=1), active[:, sl], track.take(sl), ids[sl], kt,
                            kt_lin, dur, chapter)
@@ -625,7 +635,7 @@ def _radius(budget: ErrorBudget, plan: groups.Plan | None) -> tuple[float | np.n
 
 
 def _timeline(track: Tracks, active: np.ndarray, budget: ErrorBudget,
-              plan: groups.Plan | None) -> collapse.Timeline:
+              plan: groups.Plan | None, progress: Progress = no_progress) -> collapse.Timeline:
     """The paths' keys within the budget, hidden frames collapsed (collapse.py): the plan's, which it worked out
     to decide its groups, else free knots now, a block of paths at a time."""
     if plan is not None:
@@ -633,7 +643,7 @@ def _timeline(track: Tracks, active: np.ndarray, budget: ErrorBudget,
     radius = np.broadcast_to(np.asarray(_radius(budget, plan)[0], np.float64), (track.shape[1],))
     return collapse.fold_blocks(active, lambda a, b: freeknots.point_keys(track.take(slice(a, b)), active[:, a:b],
                                                                           radius[a:b]),
-                                freeknots.block_tracks(active.shape[0]))
+                                freeknots.block_tracks(active.shape[0]), progress)
 
 
 def _d_animations(tl: collapse.Timeline, p: int, t: int, gain: np.ndarray | None, view_scale: int,
@@ -679,7 +689,8 @@ def _d_animations(tl: collapse.Timeline, p: int, t: int, gain: np.ndarray | None
 
 def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: np.ndarray, owned: list,
                   dur: str, report: Report, plan: groups.Plan | None = None,
-                  color_tolerance: float = 3.0, joined: merge.Merge | None = None) -> tuple[list[str], int, dict]:
+                  color_tolerance: float = 3.0, joined: merge.Merge | None = None,
+                  progress: Progress = no_progress) -> tuple[list[str], int, dict]:
     """The error-bounded integer encoding (module docstring) of the paths' tracks (encode.tracks) and their keys
     (collapse.Timeline) within budget, handed over as owned = [track, timeline] (emptied here, so that each is
     freed as soon as it is used: on a long capture they are the largest arrays); plan: rigid groups (local
@@ -691,7 +702,9 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     view_scale = budget.scale
     time_budget = budget.keytimes
     radius, bound = _radius(budget, plan)
+    progress("text", 0.0)
     geo = _d_animations(tl, p, t, plan.gain if plan is not None else None, view_scale, time_budget, dur)
+    progress("text", 0.2)
     del tl
     heap.give_back()  # the key texts' blocks
     d_anims, d_first, n_keys, moving, off, key_counts, per_key, decimals = geo
@@ -708,6 +721,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
                                  bound, True, lambda v, j: _path_strings(v, np.broadcast_to(off[j], (len(v), 2))),
                                  dur, d_anims)
     heap.give_back()  # the fits' temporaries
+    progress("text", 0.65)
     for j in [j for j in d_uniform if active[0, j]]:  # the static d holds frame 0 as played where it is shown
         d_first[j] = _path_strings(d_uniform[j][:1], off[j:j + 1])[0]
     if sets:  # a merged path's d is keyed for all its triangles together
@@ -717,6 +731,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     del track
     # Colour: held steps within the colour tolerance (color_steps); the first step's colour is the path's class.
     ckeys = color_steps(sheet.face_rgb, active, color_tol, tris)  # as stored: no (T, P, 3) copy
+    progress("text", 0.8)
     if sets:  # a merged path's one static colour (its code's)
         ckeys.mask[:, inside] = False
         ckeys.mask[0, inside] = True

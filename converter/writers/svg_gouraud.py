@@ -19,10 +19,10 @@ from PIL import Image, ImageDraw
 from converter.encode import keys as keyframes
 from converter.errors import InputError
 from converter.extract import painter_order
-from converter.options import ConversionOptions, Report
+from converter.options import ConversionOptions, Progress, Report, no_progress, span
 from converter.sheet import Sheet
 from converter.writers import svg_anim
-from converter.writers.gradients import exact_gradients, vertex_ramps
+from converter.writers.gradients import LinearGradients, exact_gradients, vertex_ramps
 from converter.writers.svgtext import key_times
 from converter.writers.svgtext import number as svg_number
 
@@ -31,6 +31,8 @@ COORD_FMT = "%.2f"
 UNDERLAY_FMT = "M%.1f,%.1fL%.1f,%.1fL%.1f,%.1fZ"
 COLOR_FMT = "#%06x"
 ROUNDING_PX = 0.005  # coordinates are written with 2 decimals
+GOURAUD_PROGRESS = 1024  # triangles written between progress reports
+GRADIENT_FRAMES = 32  # frames whose gradients are fitted together
 COLOR_EPS_LEVELS = 1.5  # 8-bit levels a keyframed stop colour may deviate before rounding (+0.5 from rounding)
 UNDERLAY = True  # stills of the exact method get a seamless per-part underlay
 UNDERLAY_INSET = 0.5  # px the underlay stays inside the silhouette
@@ -93,9 +95,16 @@ class _Signals:
         return np.concatenate(self.blocks, axis=2)
 
 
-def _signals_exact(tri_xy: np.ndarray, tri_rgb: np.ndarray, color_scale: float) -> tuple[_Signals, np.ndarray]:
-    """Signals of the exact method and the per-frame rank-1 residual (T, K)."""
-    g = exact_gradients(tri_xy, tri_rgb)
+def _signals_exact(tri_xy: np.ndarray, tri_rgb: np.ndarray, color_scale: float,
+                   progress: Progress = no_progress) -> tuple[_Signals, np.ndarray]:
+    """Signals of the exact method and the per-frame rank-1 residual (T, K); the gradients a block of
+    GRADIENT_FRAMES frames at a time (each triangle and frame is its own fit: the same values), with progress."""
+    t = tri_xy.shape[0]
+    parts = []
+    for a in range(0, t, GRADIENT_FRAMES):
+        progress("signals", a / max(t, 1))
+        parts.append(exact_gradients(tri_xy[a:a + GRADIENT_FRAMES], tri_rgb[a:a + GRADIENT_FRAMES]))
+    g = LinearGradients(*(np.concatenate(f) for f in zip(*parts))) if len(parts) != 1 else parts[0]
     s = _Signals()
     s.add("d", "d", PATH_FMT, tri_xy)
     for key, arr in (("x1", g.start[..., 0]), ("y1", g.start[..., 1]), ("x2", g.end[..., 0]), ("y2", g.end[..., 1])):
@@ -336,8 +345,9 @@ def _visibility(seen: np.ndarray, dur: str) -> tuple[str, str]:
     )
 
 
-def write(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
-    """Gouraud-shaded SVG: a still of options.frame, else the animation with gradients moving with the mesh."""
+def write(sheet: Sheet, options: ConversionOptions, report: Report, progress: Progress = no_progress) -> bytes:
+    """Gouraud-shaded SVG: a still of options.frame, else the animation with gradients moving with the mesh;
+    progress(stage, fraction of the writing done) between its steps and every GOURAUD_PROGRESS triangles."""
     method = "chapter" if options.shading == "gouraud-chapter" else "exact"
     t_all = sheet.n_frames
     still = options.frame is not None
@@ -362,19 +372,21 @@ def write(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
         tri, closed, stroked = seam_layout(tris, skip)
     else:  # the chapter draws no strokes: its background triangles are its answer to cracks
         tri, closed, stroked = sheet.faces[order], np.ones(len(order), bool), np.zeros(len(order), bool)
+    progress("signals", 0.05)
     tri_xy = np.take(sheet.xy[frames], tri, axis=1).astype(np.float64)  # (T, K, 3, 2)
     tri_rgb = np.take(sheet.vertex_rgb[frames], tri, axis=1).astype(np.float64)  # (T, K, 3, 3)
     eps = max(options.tolerance - ROUNDING_PX, ROUNDING_PX)
     color_scale = eps / COLOR_EPS_LEVELS  # colour levels -> px-equivalent units, so one eps bounds both
     active = np.take(sheet.visible[frames], order, axis=1)
     if method == "exact":
-        signals, residual = _signals_exact(tri_xy, tri_rgb, color_scale)
+        signals, residual = _signals_exact(tri_xy, tri_rgb, color_scale, span(progress, 0.05, 0.5))
         report.figures["gouraud_rank1_max_residual"] = float(residual[active].max()) if active.any() else 0.0
         draw = _exact_triangle
     else:
         signals = _signals_chapter(tri_xy, tri_rgb, color_scale)
         draw = _chapter_triangle
     x = signals.matrix()
+    progress("keys", 0.55)  # the signals (gradients of every triangle and frame) took half the writing
     keys: dict[bool, tuple[np.ndarray, np.ndarray]] | None = None
     if options.raw and not still:
         every = (np.ones((t_all + 1, len(order)), bool), np.concatenate([x, x[-1:]], axis=0))
@@ -405,7 +417,10 @@ def write(sheet: Sheet, options: ConversionOptions, report: Report) -> bytes:
     if still and method == "exact" and UNDERLAY:
         out += underlay(sheet.xy[k][sheet.faces[order]], sheet.vertex_rgb[k][sheet.faces[order]],
                         sheet.part_ids[order], silhouette)
+    progress("text", 0.65)
     for j, f in enumerate(order.tolist()):
+        if j % GOURAUD_PROGRESS == 0:
+            progress("text", 0.65 + 0.35 * j / len(order))
         if not emit.select(j, bool(closed[j])):
             continue
         vis = ("", "") if still else _visibility(sheet.visible[:, f], dur)

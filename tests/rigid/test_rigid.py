@@ -373,8 +373,8 @@ def test_head_local_keys_stopped_early_make_the_plan_in_full(sheet, monkeypatch,
     calls = []
     real = freeknots.shape_keys
 
-    def spy(xy, active, radius, deg, limit=None):
-        k, gave_up = real(xy, active, radius, deg, limit)
+    def spy(xy, active, radius, deg, limit=None, **kw):
+        k, gave_up = real(xy, active, radius, deg, limit, **kw)
         calls.append((limit is not None, int(gave_up.sum())))
         return k, gave_up
 

@@ -138,7 +138,7 @@ def test_validation_follows_the_same_ranges_and_choices():
                 ConversionOptions(**{e["name"]: e["min"] - 1 if not e["exclusive"] else e["min"]})
 
 
-def fake_writer(sheet, options, report) -> bytes:
+def fake_writer(sheet, options, report, progress) -> bytes:
     """A stand-in Lottie-like writer: the frame count and the kept triangles as JSON."""
     return json.dumps({"frames": sheet.n_frames, "triangles": int(sheet.kept.sum())}).encode()
 
