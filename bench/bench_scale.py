@@ -130,7 +130,8 @@ def naive_svg(sheet, sink, block: int = 256) -> int:
     coordinates with 2 decimals (frame 0's fill); returns the bytes written."""
     t = sheet.n_frames
     dur = f"{sheet.duration:.3f}s"
-    rgb = np.clip(np.rint(sheet.face_rgb[0] * 255), 0, 255).astype(np.int64)
+    rgb = np.zeros((len(sheet.faces), 3), np.int64)  # per triangle id (the kept ones; no other is drawn)
+    rgb[sheet.kept] = np.clip(np.rint(sheet.face_rgb[0] * 255), 0, 255).astype(np.int64)
     n = sink(f'<svg xmlns="http://www.w3.org/2000/svg" width="{sheet.camera.width}" '
              f'height="{sheet.camera.height}">\n'.encode())
     tris = np.asarray(sheet.order)

@@ -216,7 +216,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, progress: P
     wide = bool(len(pv)) and (pv.min() < -32768 or pv.max() > 32767)
     gouraud = options.shading != "flat"
     rgb, cact = ((np.take(sheet.vertex_rgb, verts, axis=1), vact) if gouraud
-                  else (np.take(sheet.face_rgb, tris, axis=1), active))
+                  else (sheet.face_colors(tris), active))
     progress("colours", 0.45)
     cc, cf, cv = _color_keys(rgb, cact)
     vis0, vc, vf = _changes(active)

@@ -128,7 +128,7 @@ def write_still(sheet: Sheet, options: ConversionOptions, report: Report, frame:
         raise InputError(f"frame {frame} is outside 0..{sheet.n_frames - 1}; choose one inside.")
     scale = viewbox_scale(options.tolerance)
     tris = sheet.order[sheet.visible[frame, sheet.order]]
-    levels = np.clip(np.rint(sheet.face_rgb[frame, tris] * 255), 0, 255).astype(np.int64)
+    levels = np.clip(np.rint(sheet.face_rgb[frame, sheet.color_columns(tris)] * 255), 0, 255).astype(np.int64)
     palette, cls = np.unique(levels, axis=0, return_inverse=True)
     q = np.rint(sheet.xy[frame][sheet.faces[tris]].reshape(-1, 6).astype(np.float64) * scale).astype(np.int64)
     d = _path_strings(q)
@@ -348,7 +348,7 @@ def _merge_plan(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: Track
         edge = np.zeros(len(tris) + 1, np.int64)
         edge[plan.groups.ravel()] = 1
         segment = np.cumsum(edge[:-1])
-    joined = merge.plan(segment, np.take(sheet.face_rgb, tris, axis=1), active, options.color_tolerance,
+    joined = merge.plan(segment, sheet.face_colors(tris), active, options.color_tolerance,
                         np.take(sheet.xy, sheet.faces[tris], axis=1), options.max_animations)
     o = joined.order
     if plan is not None:
@@ -472,10 +472,11 @@ def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: Track
     kt_lin = key_times(np.arange(t + 1), t, 6) if chapter else []
     out = [b'<g stroke-width="0.5" stroke-linejoin="round">']
     ids = path_ids(tris)
+    columns = sheet.color_columns(tris)
     for a in range(0, p, RAW_WRITE_PATHS):
         progress("text", a / p)
         sl = slice(a, a + RAW_WRITE_PATHS)
-        lines = _raw_block(np.take(sheet.face_rgb, tris[sl], axis=1), active[:, sl], track.take(sl), ids[sl], kt,
+        lines = _raw_block(np.take(sheet.face_rgb, columns[sl], axis=1), active[:, sl], track.take(sl), ids[sl], kt,
                            kt_lin, dur, chapter)
         out.append("\n".join(lines).encode("utf-8"))
     return out
@@ -730,7 +731,8 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
         m_anims, m_first, m_keys = _merged_geometry(track, active, m_radius, m_gain, sets, budget, dur)
     del track
     # Colour: held steps within the colour tolerance (color_steps); the first step's colour is the path's class.
-    ckeys = color_steps(sheet.face_rgb, active, color_tol, tris)  # as stored: no (T, P, 3) copy
+    columns = sheet.color_columns(tris)
+    ckeys = color_steps(sheet.face_rgb, active, color_tol, columns)  # as stored: no (T, P, 3) copy
     progress("text", 0.8)
     if sets:  # a merged path's one static colour (its code's)
         ckeys.mask[:, inside] = False
@@ -799,7 +801,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     report.counts["static_paths"] = int((~moving).sum())
     report.counts["palette"] = len(palette)
     report.counts["animated_paths"] = animated
-    err = color_error(sheet.face_rgb, active, ckeys, tris)
+    err = color_error(sheet.face_rgb, active, ckeys, columns)
     report.figures["color_error_max_levels"] = float(err.max(initial=0.0))
     report.figures["color_error_p99_levels"] = float(np.percentile(err, 99, overwrite_input=True)) if err.size else 0.0
     report.figures["keys_per_path"] = n_keys / max(p, 1)

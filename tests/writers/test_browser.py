@@ -12,7 +12,9 @@ from svgrender import chromium_frame, iou
 def pyrender_flat(anim, sheet, k):
     """pyrender's frame k with each triangle's flat Lambert colour (what the SVG paths carry)."""
     pr = render._pyrender()
-    rgba = np.concatenate([np.round(sheet.face_rgb[k] * 255), np.full((anim.n_faces, 1), 255)], 1).astype(np.uint8)
+    rgb = np.zeros((anim.n_faces, 3))  # a triangle never seen is hidden in every frame: any colour
+    rgb[sheet.kept] = sheet.face_rgb[k]
+    rgba = np.concatenate([np.round(rgb * 255), np.full((anim.n_faces, 1), 255)], 1).astype(np.uint8)
     with render.offscreen(sheet.camera.width, sheet.camera.height) as r:
         scene = render._scene(sheet.camera)
         scene.add(render._mesh(anim.frames[k], anim.faces, rgba, smooth=False))

@@ -101,7 +101,7 @@ def test_the_block_decodes_to_the_sheet_within_the_tolerance(case):
     assert err[d.shown].max() <= options.tolerance
     assert err[d.shown].max() > options.tolerance / 4  # keyframed, not stored exactly
     assert report.counts["keys"] < 0.5 * len(d.vertex_ids) * d.frames
-    cerr = np.abs(d.rgb[:-1] - sheet.face_rgb[:, d.triangles] * 255).max(axis=-1)
+    cerr = np.abs(d.rgb[:-1] - sheet.face_colors(d.triangles) * 255).max(axis=-1)
     assert cerr[d.shown].max() <= player.COLOR_LEVELS and not d.gouraud
     assert d.meta["frames"] == 24 and d.meta["viewport"] == [SIZE, SIZE]
     assert player.write(sheet, options, Report()) == data  # deterministic

@@ -250,7 +250,7 @@ def test_svg_colours_are_discrete_steps_that_play_within_the_tolerance():
         tri = int(p.get("id")[1:])
         anims = p.findall(f"{SVG}animate[@attributeName='color']")
         shown = sheet.visible[:, tri]
-        exact = sheet.face_rgb[:, tri].astype(np.float64) * 255
+        exact = sheet.face_colors(np.array([tri]))[:, 0].astype(np.float64) * 255
         if not anims:
             continue
         animated += 1
