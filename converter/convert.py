@@ -25,6 +25,7 @@ WRITE_FROM = 0.2  # where the writer's share of a job's progress starts: the fla
 # time after loading (2D stage 1.0 s against writer 3.1 s on the capture-like face, 1 against 8 s on 8k x 1,000,
 # 7 against 40 s on the ICT head x 1,000), so the ETA extrapolated from the fraction done holds (bench_progress)
 
+
 @dataclass
 class Result:
     """A finished conversion: the output bytes, its media type and extension, and the Report."""
