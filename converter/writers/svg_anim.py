@@ -58,6 +58,7 @@ UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples 
 KEY_TEXT_KEYS = 1 << 15  # keys whose d and keyTimes texts exist at once (a block of paths)
 RAW_COUNT_CELLS = 1 << 17  # vertex-frames per block when counting the raw encoding's bytes (~10 MB of temporaries)
 RAW_WRITE_PATHS = 128  # paths per block when writing it (its one format call holds 18 objects per tri-frame)
+ORDER_DONE = 0.02  # progress of the writing when the drawing order is known and the keys start
 KEYS_DONE = 0.78  # progress of the writing when the keys are done and the text starts (wall time: the text took
 # 20-22 % of the writer on the capture-like face, 8k x 1,000 and the ICT head x 1,000)
 
@@ -297,17 +298,17 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
         report.sizes["raw_d_values"] = raw_values_bytes(sheet.xy, sheet.faces[tris])
     budget = ErrorBudget.split(options.tolerance, max(sheet.camera.width, sheet.camera.height))
     plan = None
-    keys_from = 0.02  # progress of the writing where the plain keys start, when they are worked out
+    keys_from = ORDER_DONE  # progress of the writing where the plain keys start, when they are worked out
     if mode == "bounded" and options.rigid and p:
         costs = groups.Costs(lambda m: len(group_open(m, t, dur)), len(CLOSE), BYTES_PER_KEY)
         plan = groups.plan(sheet.xy, sheet.faces, sheet.part_ids, sheet.neutral, tris, active, budget, costs,
-                           progress=span(progress, 0.02, KEYS_DONE))
+                           progress=span(progress, ORDER_DONE, KEYS_DONE))
         heap.give_back()  # the plan's temporaries, before the text's
         if plan.head is not None:  # else nothing pays for a group: the plain encoding, byte for byte
             tris, active, track = tris[plan.order], np.take(active, plan.order, axis=1), plan.track
         else:  # the plan stopped before its refining: the plain keys take that part of the progress
             plan = None
-            keys_from = 0.02 + (KEYS_DONE - 0.02) * groups.PLAN_SHARES[1]
+            keys_from = ORDER_DONE + (KEYS_DONE - ORDER_DONE) * groups.PLAN_SHARES[1]
     if plan is None:  # the Sheet's float32 vertices, read a block of paths at a time
         track = Tracks.screen(sheet.xy, sheet.faces[tris])
     joined = None
@@ -315,7 +316,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
         joined, tris, active, track, plan = _merge_plan(sheet, tris, active, track, plan, options)
     if mode in ("raw", "chapter"):
         body = _encode_raw(sheet, tris, active, track, dur, chapter=mode == "chapter",
-                           progress=span(progress, 0.02, 1.0))
+                           progress=span(progress, ORDER_DONE, 1.0))
         scale = 1
     else:
         owned = [track, _timeline(track, active, budget, plan, span(progress, keys_from, KEYS_DONE))]
