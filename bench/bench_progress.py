@@ -6,8 +6,8 @@ own `seconds_left` extrapolation, frozen between updates as the bar is) at a qua
 the run, as a ratio to the time really left (1.00 = right; below 1, too hopeful).
 
 "Before" replays the same run as the code before 2026-12-06 reported it: the same calls up to the writer, its
-2D stage mapped onto 0.1-0.6 instead of 0.1-0.3, then 0.6 when the writer started and nothing until done (the
-writers reported nothing). Those were exactly its calls, so both columns come from one run.
+2D stage mapped onto 0.1-0.6 instead of 0.1-WRITE_FROM, then 0.6 when the writer started and nothing until done
+(the writers reported nothing). Those were exactly its calls, so both columns come from one run.
 """
 
 from __future__ import annotations
@@ -124,10 +124,10 @@ def run() -> str:
         "runs it), the others' from a face already in memory (`convert_animation`: the bar starts at 0.1, which "
         "the loading has when there is a file, so their early ETAs read short). The writer now reports its phases "
         "(motion analysis, overlap search, the group decision's blocks of runs, the keys' blocks of paths, the "
-        "text), and the 2D stage ends at 0.3 of the bar instead of 0.6: the flat SVG's writer takes 75-85 % of a "
-        "long conversion. The web job page reads the same progress (and its cancel button acts at the next "
+        f"text), and the 2D stage ends at {WRITE_FROM} of the bar instead of 0.6: the flat SVG's writer takes 75-90 % "
+        "of a long conversion. The web job page reads the same progress (and its cancel button acts at the next "
         "update, which inside the writer used to mean at the end). "
-        + __doc__.split("\n\n")[2].replace("\n", " "),
+        + __doc__.split("\n\n")[2].replace("\n", " ").replace("WRITE_FROM", str(WRITE_FROM)),
         "",
         *rows,
     ])
