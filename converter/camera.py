@@ -8,6 +8,7 @@ from typing import NamedTuple
 import numpy as np
 
 from converter.errors import InputError
+from converter.viewport import to_pixels, view_extent
 
 FIT_CHUNK = 1 << 20  # points per chunk when fitting a camera to every vertex of every frame
 
@@ -50,11 +51,8 @@ class Camera(NamedTuple):
         view = look_at(center + direction * distance, center, np.array([0.0, 1.0, 0.0]))
         ext = np.full((2, 3), np.inf)  # row 0: minima, row 1: negated maxima of (depth, x, y)
         for c in chunks():
-            eye = c @ view[:3, :3].T + view[:3, 3]
-            depth = -eye[:, 2]
-            xs, ys = (eye[:, 0], eye[:, 1]) if ortho else (eye[:, 0] / depth, eye[:, 1] / depth)
-            both = np.stack([depth, xs, ys])
-            ext = np.minimum(ext, np.stack([both.min(axis=1), -both.max(axis=1)]))
+            lo_hi = view_extent(c @ view[:3, :3].T, view[:3, 3], ortho)
+            ext = np.minimum(ext, np.stack([lo_hi[0], -lo_hi[1]]))
         (d_lo, x_lo, y_lo), (d_hi, x_hi, y_hi) = ext[0], -ext[1]
         near = max(float(d_lo) * 0.5, 1e-4 * distance)
         far = float(d_hi) * 1.5 + 1e-6
@@ -70,14 +68,7 @@ class Camera(NamedTuple):
         """Pixel xy (..., 2) with y down, NDC depth (...), and clip w (...) of world points (..., 3)."""
         m = self.projection @ self.view
         p = np.asarray(points, np.float64)
-        clip = p @ m[:3, :3].T + m[:3, 3]
-        w = p @ m[3, :3] + m[3, 3]
-        safe_w = np.where(np.abs(w) > 1e-12, w, 1e-12)
-        ndc = clip / safe_w[..., None]
-        xy = np.empty(p.shape[:-1] + (2,), np.float64)
-        xy[..., 0] = (ndc[..., 0] + 1) * 0.5 * self.width
-        xy[..., 1] = (1 - ndc[..., 1]) * 0.5 * self.height
-        return xy, ndc[..., 2], w
+        return to_pixels(p @ m[:3, :3].T, p @ m[3, :3], m[:3, 3], m[3, 3], self.width, self.height)
 
     def eye_position(self) -> np.ndarray:
         """The camera's position in world space."""

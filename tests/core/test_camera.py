@@ -183,3 +183,68 @@ def test_compiled_cull_is_the_numpy_cull(dtype):
     assert got.shape == (t, f) and np.array_equal(got, want)
     assert 0.1 < want.mean() < 0.5  # both outcomes, often
     assert np.array_equal(cull(xy[2], ndc_z[2], w[2], faces, 64, 64), want[2])  # one frame, no frame axis
+
+
+def numpy_project(cam, points):
+    """Camera.project as numpy computed it before its tail was compiled (the reference)."""
+    m = cam.projection @ cam.view
+    p = np.asarray(points, np.float64)
+    clip = p @ m[:3, :3].T + m[:3, 3]
+    w = p @ m[3, :3] + m[3, 3]
+    safe_w = np.where(np.abs(w) > 1e-12, w, 1e-12)
+    ndc = clip / safe_w[..., None]
+    xy = np.empty(p.shape[:-1] + (2,), np.float64)
+    xy[..., 0] = (ndc[..., 0] + 1) * 0.5 * cam.width
+    xy[..., 1] = (1 - ndc[..., 1]) * 0.5 * cam.height
+    return xy, ndc[..., 2], w
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_compiled_projection_is_the_numpy_projection(ortho, dtype):
+    # Points in front of, on and behind the eye plane (w 0, tiny, negative), far outside the view, not finite;
+    # shaped as frames (T, V, 3), one frame (V, 3) and one point (3,).
+    rng = np.random.default_rng(11)
+    frames = rng.normal(0, 1.5, (5, 300, 3))
+    cam = Camera.fit(frames[:, :200], size=97, yaw=20, pitch=-10, ortho=ortho)
+    eye = cam.eye_position()
+    frames[:, ::29] = eye + rng.normal(0, 1e-13, (5, len(range(0, 300, 29)), 3))  # |w| about 1e-12
+    frames[:, 3::31] = eye
+    frames[:, 7::37] = 2 * eye
+    frames[:, 11::41] *= 1e6
+    frames[:, 13::43, 1] = np.nan
+    frames = frames.astype(dtype)
+    for pts in (frames, frames[2], frames[3, 5]):
+        got, want = cam.project(pts), numpy_project(cam, pts)
+        for g, e in zip(got, want):
+            assert g.shape == e.shape and g.dtype == np.float64
+            assert np.array_equal(g, e, equal_nan=True)
+    w = numpy_project(cam, frames)[2]
+    assert ortho or (w <= 0).any()  # points behind the eye, and in float64 some on its plane (the guarded divide)
+    assert ortho or dtype == np.float32 or (np.abs(w) <= 1e-12).any()
+
+
+def numpy_fit_extent(frames, view, ortho):
+    """The extent Camera.fit measured as numpy before it was compiled (the reference): row 0 minima, row 1
+    negated maxima of (depth, x, y)."""
+    eye = np.asarray(frames, np.float64).reshape(-1, 3) @ view[:3, :3].T + view[:3, 3]
+    depth = -eye[:, 2]
+    xs, ys = (eye[:, 0], eye[:, 1]) if ortho else (eye[:, 0] / depth, eye[:, 1] / depth)
+    both = np.stack([depth, xs, ys])
+    return np.stack([both.min(axis=1), -both.max(axis=1)])
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_compiled_fit_extent_is_numpys(ortho):
+    from converter.viewport import view_extent
+
+    rng = np.random.default_rng(5)
+    pts = rng.normal(0, 2, (4000, 3)).astype(np.float32)
+    view = look_at(np.array([3.0, 1.0, 12.0]), np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    want = numpy_fit_extent(pts, view, ortho)
+    got = view_extent(pts.astype(np.float64) @ view[:3, :3].T, view[:3, 3], ortho)
+    assert np.array_equal(np.stack([got[0], -got[1]]), want)
+    pts[17, 1] = np.nan  # a NaN propagates as numpy's min and max propagate it
+    want = numpy_fit_extent(pts, view, ortho)
+    got = view_extent(pts.astype(np.float64) @ view[:3, :3].T, view[:3, 3], ortho)
+    assert np.array_equal(np.stack([got[0], -got[1]]), want, equal_nan=True) and np.isnan(want).any()
