@@ -4,7 +4,7 @@ and the web runner's callback stops a cancelled job by raising from it."""
 import pytest
 
 from converter import formats
-from converter.convert import WRITE_FROM, convert_animation
+from converter.convert import PREPARED_AT, SIMPLIFY_FROM, WRITE_FROM, convert_animation, prepared_at
 from converter.options import ConversionOptions, span
 
 
@@ -70,3 +70,41 @@ def test_span_maps_a_part_onto_its_share():
     part("z", 2.0)  # clamped to the part's end
     assert seen == [("keys", 0.3), ("keys", 0.55), ("keys", 0.8)]
     assert span(lambda s, f: None, 0.0, 1.0)("a", 0.5) is None
+
+
+def test_a_triangle_budget_reports_its_passes_and_takes_its_share(anim):
+    # The sample's 2,998 triangles to 400: the budget's passes over every frame get a share of the bar of their own
+    # (before, one jump to 0.1 after them), and the 2D stage and the writer keep theirs of what is left.
+    options = ConversionOptions(size=256, max_triangles=400)
+    ready = prepared_at(anim, options)
+    assert SIMPLIFY_FROM < PREPARED_AT < ready < 0.5
+    data, calls = recorded(anim, options)
+    fractions = [f for _, f in calls]
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0
+    budget = [f for s, f in calls if s == "simplify"]
+    assert budget[0] >= SIMPLIFY_FROM and budget[-1] == pytest.approx(ready)
+    assert len({round(f, 6) for f in budget}) >= 8, budget  # facing, motion and deviation steps
+    assert min(f for s, f in calls if s not in ("load", "simplify")) >= ready - 1e-12
+    assert data == convert_animation(anim, options).data  # reporting changes nothing
+
+
+def test_the_budget_share_follows_the_triangles_it_removes():
+    class Face:  # prepared_at reads only the triangle count
+        n_faces = 51_000
+
+    shares = [prepared_at(Face, ConversionOptions(max_triangles=n)) for n in (51_000, 20_000, 1_500, 100)]
+    assert shares[0] == PREPARED_AT and shares == sorted(shares) and shares[-1] < 1.0
+    assert shares[2] > 0.5  # ICT head to 1,500: its passes are more than half of the whole conversion
+    assert prepared_at(Face, ConversionOptions()) == PREPARED_AT
+
+
+def test_a_callback_that_raises_stops_the_budget(anim):
+    class Stop(Exception):
+        pass
+
+    def stop(name: str, fraction: float) -> None:
+        if name == "simplify":
+            raise Stop(fraction)
+
+    with pytest.raises(Stop):
+        convert_animation(anim, ConversionOptions(size=256, max_triangles=400), progress=stop)

@@ -106,3 +106,52 @@ def test_long_clips_read_motion_from_evenly_spaced_frames(monkeypatch):
     every = np.linalg.norm(simplify.motion_attributes(frames), axis=1)
     np.testing.assert_allclose(sampled, every, rtol=0.05, atol=0.02 * every.max())
     assert every.max() > 0.01  # the grid deforms: the comparison is not of zeros
+
+
+def numpy_rigid_residual(frames, rounds=3):
+    """simplify.rigid_residual as numpy computed it before it was compiled (the reference)."""
+    ref = np.asarray(frames[0], np.float64)
+    out = np.empty(frames.shape, np.float64)
+    for s in range(0, len(frames), simplify.FRAME_BLOCK):
+        x = np.asarray(frames[s:s + simplify.FRAME_BLOCK], np.float64)
+        weight = np.ones(x.shape[:2])
+        for _ in range(rounds):
+            wsum = weight.sum(axis=1, keepdims=True)[..., None]
+            c_ref = (weight[..., None] * ref[None]).sum(axis=1, keepdims=True) / wsum
+            c_fr = (weight[..., None] * x).sum(axis=1, keepdims=True) / wsum
+            xc = x - c_fr
+            h = np.swapaxes(weight[..., None] * xc, 1, 2) @ (ref[None] - c_ref)
+            u, _, vt = np.linalg.svd(h)
+            fix = np.ones((len(x), 3))
+            fix[:, 2] = np.sign(np.linalg.det(u @ vt))
+            rot = (u * fix[:, None, :]) @ vt
+            residual = xc @ rot + c_ref - ref[None]
+            r = np.linalg.norm(residual, axis=-1)
+            weight = (r <= np.median(r, axis=1, keepdims=True)).astype(np.float64)
+        out[s:s + simplify.FRAME_BLOCK] = residual
+    return out
+
+
+def test_compiled_rigid_residual_is_the_numpy_one():
+    # Sums in another order than numpy's (and BLAS's), so equal to rounding, not bit for bit; the trimmed fit
+    # picks the same vertices.
+    frames = _long_deforming_grid(2 * simplify.FRAME_BLOCK + 3)
+    got, want = simplify.rigid_residual(frames), numpy_rigid_residual(frames)
+    assert got.shape == want.shape
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    assert np.abs(want).max() > 0.05  # the grid deforms: not a comparison of zeros
+
+
+def test_compiled_deviation_is_numpys():
+    rng = np.random.default_rng(3)
+    b, v, vs, n = 4, 300, 40, 120
+    xy0, xy1 = rng.uniform(0, 256, (b, v, 2)), rng.uniform(0, 256, (b, vs, 2))
+    verts = rng.choice(v, n, replace=False)
+    corner = rng.integers(0, vs, (n, 3)).astype(np.int32)
+    bary = rng.dirichlet(np.ones(3), n)
+    shown = rng.random((b, n)) < 0.7
+    follow = sum(bary[None, :, c, None] * xy1[:, corner[:, c]] for c in range(3))
+    want = np.where(shown, np.linalg.norm(follow - xy0[:, verts], axis=-1), 0.0)
+    got = np.empty((b, n))
+    simplify._deviation(xy0, xy1, verts, corner, bary, shown, got)
+    assert np.array_equal(got, want)
