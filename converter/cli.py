@@ -13,7 +13,7 @@ from converter import formats, framing, warm
 from converter.bundled import sample_path
 from converter.convert import convert
 from converter.errors import FacesvgError, InputError
-from converter.options import ConversionOptions, OptionField, option_fields, seconds_left
+from converter.options import ConversionOptions, Eta, OptionField, option_fields
 from converter.outputs import choices, output_kind
 from converter.userfiles import check_output, write_atomic
 
@@ -26,17 +26,18 @@ class ProgressBar:
         self.last = -1.0
         self.stage = ""
         self.start: float | None = None
+        self.eta = Eta()
 
     def __call__(self, stage: str, fraction: float) -> None:
         if not self.enabled:
             return
         now = time.monotonic()
         self.start = now if self.start is None else self.start
+        left = self.eta(stage, fraction, now)  # every call: it must see where loading ended
         if fraction < 1.0 and now - self.last < 0.1 and stage == self.stage:  # a new stage shows at once
             return
         self.last, self.stage = now, stage
         filled = int(round(fraction * 30))
-        left = seconds_left(now - self.start, fraction) if fraction < 1.0 else None
         eta = f"ETA {int(left) // 60}:{int(left) % 60:02d}" if left is not None and now - self.start > 1.0 else ""
         sys.stderr.write(f"\r[{'#' * filled}{' ' * (30 - filled)}] {fraction * 100:5.1f}% {stage:<12} {eta:<10}")
         if fraction >= 1.0:

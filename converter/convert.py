@@ -24,6 +24,7 @@ from converter.userfiles import file_sha256
 WRITE_FROM = 0.2  # where the writer's share of a job's progress starts: the flat SVG's writer takes 75-90 % of the
 # time after loading (2D stage 1.0 s against writer 3.1 s on the capture-like face, 1 against 8 s on 8k x 1,000,
 # 7 against 40 s on the ICT head x 1,000), so the ETA extrapolated from the fraction done holds (bench_progress)
+LOADED_AT = 0.05  # where reading the input ends (a guess: options.Eta extrapolates from there)
 PREPARED_AT = 0.1  # where the 3D stages end (loading 0.05, FAP driving, cloning) and the 2D stage starts...
 SIMPLIFY_FROM = 0.08  # ... unless a triangle budget simplifies the mesh: it starts here and takes its share
 BUDGET_COST = 0.04  # its time per original triangle-frame against the rest's per budget triangle-frame: 59 ns (its
@@ -44,7 +45,7 @@ def load(path: str | Path, options: ConversionOptions, cache: str | Path | None 
          progress: Progress = no_progress) -> FaceAnimation:
     """Read the input file named by path (plus an optional point cache) with the options' fps and animation."""
     if options.weights:  # the input is a face with named morph targets, animated by the capture
-        return drive_file(path, options.weights, fps=options.fps, progress=lambda s, f: progress(s, 0.05 * f))
+        return drive_file(path, options.weights, fps=options.fps, progress=lambda s, f: progress(s, LOADED_AT * f))
     return formats.load(path, fps=options.fps, cache=cache, animation=options.animation)
 
 
@@ -162,6 +163,7 @@ def convert(path: str | Path, options: ConversionOptions, progress: Progress = n
     progress("load", 0.0)
     anim = load(path, options, cache, progress)
     load_s = time.perf_counter() - t
+    progress("loaded", LOADED_AT)
     sha = file_sha256(path) if Path(path).is_file() else ""  # an ICT FaceKit folder has no one file to hash
     result = convert_animation(anim, options, progress, source_sha256=sha, on_prepared=on_prepared)
     result.report.timings = {"load": load_s, **result.report.timings}

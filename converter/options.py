@@ -67,6 +67,33 @@ def seconds_left(elapsed: float, fraction: float, min_fraction: float = 0.05) ->
     return max(elapsed / fraction * (1.0 - fraction), 0.0)
 
 
+LOAD_STAGES = frozenset({"load", "weights"})  # reading the input: its share of the bar is a guess made before it
+
+
+class Eta:
+    """Seconds a conversion still needs from its progress calls (stage, fraction, now): extrapolated from the
+    progress made since the input was read, whose time no share set before reading can foresee (driving the ICT
+    head by a capture is a third of a mobile-preset run, reading a small glTF nothing)."""
+
+    def __init__(self) -> None:
+        self.origin: tuple[float, float] | None = None  # (time, fraction) the extrapolation counts from
+        self.loading = True
+
+    def __call__(self, stage: str, fraction: float, now: float) -> float | None:
+        if self.origin is None or (self.loading and stage not in LOAD_STAGES):
+            self.origin = (now, fraction)
+            self.loading = stage in LOAD_STAGES
+        return seconds_left_since(self.origin, fraction, now)
+
+
+def seconds_left_since(origin: tuple[float, float], fraction: float, now: float) -> float | None:
+    """seconds_left() of the progress made since origin (time, fraction); None when done or too little done."""
+    t0, f0 = origin
+    if fraction >= 1.0 or f0 >= 1.0:
+        return None
+    return seconds_left(now - t0, (fraction - f0) / (1.0 - f0))
+
+
 @dataclass(frozen=True)
 class Option:
     """What the CLI, the web form, the API and OpenAPI show and check for one ConversionOptions field."""

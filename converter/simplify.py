@@ -27,10 +27,9 @@ from converter.options import ConversionOptions, Progress, Report, no_progress, 
 MOTION_COMPONENTS = 6  # principal components of each vertex's displacement carried as attributes
 MOTION_WEIGHT = 4.0  # attribute weight: how much a motion mismatch costs against geometric error
 MOTION_FRAMES = 512  # frames the motion attributes read at most: memory and the (3T)^2 eigenproblem stay bounded
-# Where on the budget's own progress the motion attributes start, the mesh is simplified, and the deviation check
-# starts: measured wall seconds on the ICT head x 4,000 frames (facing 3.6, motion 3.2, simplifying 0.05, deviation
-# 4.1); the facing and deviation passes read every frame, the motion at most MOTION_FRAMES
-BUDGET_SHARES = (0.33, 0.62, 0.63)
+# The budget's passes, ms per frame they read on the ICT head (wall, 1,000 and 4,000 frames): which triangles ever
+# face the camera and the deviation read every frame, the motion at most MOTION_FRAMES; their progress shares
+BUDGET_MS = {"facing": 1.1, "motion": 6.9, "deviation": 1.1}
 
 _P = ctypes.POINTER
 
@@ -141,6 +140,13 @@ def motion_attributes(frames: np.ndarray, components: int = MOTION_COMPONENTS,
     return out
 
 
+def budget_shares(n_frames: int) -> tuple[float, float, float]:
+    """Where on the budget's own progress the motion pass starts, the simplification, and the deviation pass."""
+    facing, motion = BUDGET_MS["facing"] * n_frames, BUDGET_MS["motion"] * min(n_frames, MOTION_FRAMES)
+    total = facing + motion + BUDGET_MS["deviation"] * n_frames
+    return facing / total, (facing + motion) / total, (facing + motion) / total
+
+
 def _part_simplify(fn, positions: np.ndarray, attrs: np.ndarray, lock: np.ndarray, faces: np.ndarray,
                    target: int, flags: int = 0) -> np.ndarray:
     """One part's triangles simplified to about target triangles (vertices shared with other parts locked)."""
@@ -192,8 +198,8 @@ PER_VERTEX_EXTRAS = ("node_of_vertex", "joint_of_vertex", "framed_vertices")  # 
 def simplify(anim: FaceAnimation, max_triangles: int, report: Report,
              options: ConversionOptions | None = None, progress: Progress = no_progress) -> FaceAnimation:
     """The animation on a simplified mesh of at most max_triangles triangles (a subset of its vertices);
-    progress through its passes over every frame (BUDGET_SHARES)."""
-    motion_from, simplify_from, deviation_from = BUDGET_SHARES
+    progress through its passes over the frames (budget_shares)."""
+    motion_from, simplify_from, deviation_from = budget_shares(anim.n_frames)
     if max_triangles < 4:
         raise InputError(f"max-triangles must be at least 4, got {max_triangles}.")
     faces, part_ids = anim.faces, anim.part_ids

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 
-from converter.options import seconds_left
+from converter.options import seconds_left, seconds_left_since
 from webapp.jobstore import DONE, QUEUED, RUNNING, Job
 
 DEFAULT_SECONDS = 20.0  # a job's duration before any has finished on this server
@@ -17,10 +17,15 @@ def typical_duration(jobs: list[Job]) -> float:
 
 
 def remaining(job: Job, typical: float, now: float | None = None) -> float:
-    """Seconds a running job still needs, from the progress the converter reported (or the typical duration)."""
+    """Seconds a running job still needs, from the progress the converter reported since it had read the input
+    (before that from the start), or the typical duration."""
     now = time.time() if now is None else now
     elapsed = max(now - (job.started or now), 0.0)
-    left = seconds_left(elapsed, job.progress)
+    origin = job.progress_origin
+    if origin:
+        left = seconds_left_since((float(origin["time"]), float(origin["progress"])), job.progress, now)
+    else:
+        left = seconds_left(elapsed, job.progress)
     return left if left is not None else max(typical - elapsed, 1.0)
 
 

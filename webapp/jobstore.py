@@ -34,6 +34,8 @@ class Job:
     owner: str = ""  # the worker holding the job while running (empty otherwise)
     lease: float = 0.0  # the holder's claim expires at this time unless renewed (heartbeat)
     client: str = ""  # who submitted it (API key id or browser session id; empty when keys are off)
+    progress_origin: dict = field(default_factory=dict)  # {"time", "progress"} where the input had been read: the
+    # running attempt's ETA counts from there (converter.options.Eta)
 
     def to_json(self) -> dict:
         """Plain dict of the record."""
@@ -41,7 +43,7 @@ class Job:
 
 
 COLUMNS = tuple(f.name for f in fields(Job))
-JSON_COLUMNS = ("options", "files", "result")
+JSON_COLUMNS = ("options", "files", "result", "progress_origin")
 
 
 class JobStore:
@@ -80,7 +82,8 @@ class JobStore:
             return False
         now = time.time()
         return self.transition(job_id, (QUEUED,), state=RUNNING, stage="starting", started=now,
-                               attempts=job.attempts + 1, owner=owner, lease=now + lease_seconds)
+                               attempts=job.attempts + 1, owner=owner, lease=now + lease_seconds,
+                               progress_origin={})
 
     def claim_next(self, owner: str, lease_seconds: float) -> str | None:
         """Claim the oldest queued job for owner; its id, or None when nothing is queued."""
@@ -116,12 +119,12 @@ class SQLiteStore(JobStore):
                 "CREATE TABLE IF NOT EXISTS jobs (id TEXT PRIMARY KEY, state TEXT, stage TEXT, progress REAL, "
                 "message TEXT, filename TEXT, kind TEXT, options TEXT, files TEXT, created REAL, started REAL, "
                 "finished REAL, attempts INTEGER, result TEXT, owner TEXT DEFAULT '', lease REAL DEFAULT 0, "
-                "client TEXT DEFAULT '')"
+                "client TEXT DEFAULT '', progress_origin TEXT DEFAULT '{}')"
             )
             have = {r[1] for r in db.execute("PRAGMA table_info(jobs)")}
             for column, decl in (("owner", "TEXT DEFAULT ''"), ("lease", "REAL DEFAULT 0"),
-                                 ("client", "TEXT DEFAULT ''")):
-                if column not in have:  # a table written before leases existed
+                                 ("client", "TEXT DEFAULT ''"), ("progress_origin", "TEXT DEFAULT '{}'")):
+                if column not in have:  # a table written before these existed
                     db.execute(f"ALTER TABLE jobs ADD COLUMN {column} {decl}")
             db.execute("CREATE INDEX IF NOT EXISTS jobs_created ON jobs (created)")
             db.execute("CREATE INDEX IF NOT EXISTS jobs_state ON jobs (state)")
@@ -183,7 +186,8 @@ class SQLiteStore(JobStore):
         now = time.time()
         row = self._conn().execute(
             "UPDATE jobs SET state = ?, stage = 'starting', started = ?, attempts = attempts + 1, owner = ?, "
-            "lease = ? WHERE id = (SELECT id FROM jobs WHERE state = ? ORDER BY created LIMIT 1) AND state = ? "
+            "lease = ?, progress_origin = '{}' "
+            "WHERE id = (SELECT id FROM jobs WHERE state = ? ORDER BY created LIMIT 1) AND state = ? "
             "RETURNING id", (RUNNING, now, owner, now + lease_seconds, QUEUED, QUEUED)).fetchall()
         return row[0][0] if row else None
 

@@ -121,7 +121,7 @@ def settle(store: JobStore, storage: Storage, job_id: str, owner: str, retries: 
         return "cancelled"
     if job.attempts <= retries:
         if store.transition(job_id, (RUNNING,), holder=owner, state=QUEUED, owner="", lease=0.0, progress=0.0,
-                            stage=f"re-queued: {why}"):
+                            progress_origin={}, stage=f"re-queued: {why}"):
             return "requeued"
         return None
     tries = "once" if job.attempts == 1 else f"{job.attempts} times"

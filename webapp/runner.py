@@ -20,7 +20,7 @@ from converter.convert import convert
 from converter.errors import FacesvgError
 from converter.extract import extract, fit_camera
 from converter.isolated import die_with_parent
-from converter.options import ConversionOptions
+from converter.options import ConversionOptions, Eta
 from converter.outputs import output_kind
 from converter.userfiles import write_atomic
 from converter.verify import verify_animation
@@ -127,24 +127,32 @@ def record_event(storage: Storage, job_id: str, line: str) -> None:
 
 
 class ProgressRecorder:
-    """Progress callback that writes (stage, fraction) to the store at most every 0.2 s and checks for cancel."""
+    """Progress callback that writes (stage, fraction) to the store at most every 0.2 s and checks for cancel;
+    with them, once, where the input had been read (the ETA's origin: options.Eta)."""
 
     def __init__(self, store: JobStore, job_id: str, interval: float = 0.2, owner: str | None = None,
                  lost=None) -> None:
         self.store, self.job_id, self.interval = store, job_id, interval
         self.owner, self.lost = owner, lost
         self.last = 0.0
+        self.eta = Eta()
+        self.origin_saved = False
 
     def __call__(self, stage: str, fraction: float) -> None:
         if self.lost is not None and self.lost.is_set():
             raise ClaimLost()
+        self.eta(stage, fraction, time.time())  # every call: it must see where loading ended
         now = time.monotonic()
         if now - self.last < self.interval and fraction < 1.0:
             return
         self.last = now
         fraction = float(min(max(fraction, 0.0), 1.0))
+        extra = {}
+        if not self.eta.loading and not self.origin_saved and self.eta.origin is not None:
+            extra["progress_origin"] = {"time": self.eta.origin[0], "progress": round(self.eta.origin[1], 4)}
+            self.origin_saved = True
         if not self.store.transition(self.job_id, (RUNNING,), holder=self.owner, stage=stage,
-                                     progress=round(fraction, 4)):
+                                     progress=round(fraction, 4), **extra):
             job = self.store.get(self.job_id)
             if job is None:
                 raise JobCancelled()

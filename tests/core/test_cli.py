@@ -145,13 +145,34 @@ def test_progress_bar_shows_an_eta_from_the_progress_so_far(monkeypatch, capsys)
     clock = iter([100.0, 104.0, 112.0])
     monkeypatch.setattr(cli.time, "monotonic", lambda: next(clock))
     bar = cli.ProgressBar(enabled=True)
-    bar("load", 0.0)
+    bar("extract", 0.0)
     bar("extract", 0.25)  # 4 s for a quarter: 12 s left
     bar("write", 0.5)  # 12 s for a half: 12 s left
     err = capsys.readouterr().err
     assert "ETA 0:12" in err.split("\r")[2] and "ETA 0:12" in err.split("\r")[3]
     assert "ETA" not in err.split("\r")[1]
     assert seconds_left(10.0, 0.01) is None and seconds_left(30.0, 0.5) == 30.0
+
+
+def test_the_eta_counts_from_where_loading_ended(monkeypatch, capsys):
+    # Loading (30 s here, a face driven by a long capture) has a guessed share of the bar (0.05 in convert, here
+    # 1/16 for exact arithmetic): the ETA extrapolates from the progress made since, not from the start.
+    from converter import cli
+    from converter.options import Eta
+
+    clock = iter([100.0, 120.0, 130.0, 140.0, 145.0])
+    monkeypatch.setattr(cli.time, "monotonic", lambda: next(clock))
+    bar = cli.ProgressBar(enabled=True)
+    bar("load", 0.0)
+    bar("weights", 0.03)
+    bar("loaded", 0.0625)
+    bar("simplify", 0.53125)  # half of what is after loading in 10 s: 10 s left (from the start: 35 s)
+    bar("write", 0.765625)  # three quarters in 15 s: 5 s left
+    err = capsys.readouterr().err.split("\r")
+    assert "ETA 0:10" in err[4] and "ETA 0:05" in err[5], err
+    eta = Eta()  # a conversion of a face in memory: no loading, counted from its first call
+    assert eta("project", 0.125, 0.0) is None and eta("write", 0.5625, 5.0) == 5.0
+    assert eta("done", 1.0, 9.0) is None
 
 
 def test_preset_fills_only_the_flags_not_given():

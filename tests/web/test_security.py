@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import re
 import time
+import uuid
 
 import pytest
 
@@ -192,6 +193,39 @@ def test_queue_position_and_eta_follow_the_queue_and_the_reported_progress(tmp_p
     queue.workers = 2  # a free worker: the first queued job starts at once
     assert standing(queue, store.get("2" * 32))["eta_seconds"] == pytest.approx(10, abs=0.1)
     store.close()
+
+
+@pytest.mark.parametrize("backend", ["sqlite", "redis"])
+def test_the_eta_counts_from_where_the_job_had_read_its_input(tmp_path, backend, request):
+    # A job that spent 30 s loading (a face driven by a long capture), then did half of the rest in 10 s: 10 s
+    # left, where extrapolating from its start says 40 s. A re-claimed job starts without an origin.
+    from webapp.eta import remaining
+    from webapp.jobstore import open_store
+    from webapp.runner import ProgressRecorder
+
+    url = request.getfixturevalue("redis_url") if backend == "redis" else f"sqlite:///{tmp_path / 't.sqlite3'}"
+    store = open_store(url)
+    job_id = uuid.uuid4().hex  # the session's Redis database is shared
+    store.add(Job(id=job_id, created=time.time()))
+    assert store.claim(job_id, "w", 60)
+    clock = iter([1000.0, 1020.0, 1030.0, 1040.0])
+    recorder = ProgressRecorder(store, job_id, interval=0, owner="w")
+    real = time.time
+    try:
+        time.time = lambda: next(clock)
+        recorder("load", 0.0)
+        recorder("weights", 0.03)
+        recorder("loaded", 0.0625)
+        recorder("simplify", 0.53125)
+    finally:
+        time.time = real
+    job = store.get(job_id)
+    assert job.progress_origin == {"time": 1030.0, "progress": 0.0625}
+    assert remaining(job, 20.0, now=1040.0) == pytest.approx(10.0, abs=0.01)  # progress is stored to 4 places
+    job.progress_origin, job.started = {}, 1000.0
+    assert remaining(job, 20.0, now=1040.0) == pytest.approx(35.3, abs=0.1)  # from the start, as before
+    assert store.transition(job_id, (RUNNING,), state=QUEUED, owner="")
+    assert store.claim(job_id, "w2", 60) and store.get(job_id).progress_origin == {}
 
 
 def test_upload_form_has_the_mobile_preset_and_nav_links_the_api_page(embedded):
