@@ -139,11 +139,13 @@ def run() -> str:
         "One run per case (wall time matters here: it is what the bar extrapolates), from the conversion's first "
         "progress call to its last: the ICT head's from loading the head and the capture (`convert`, as the CLI "
         "runs it), the others' from a face already in memory (`convert_animation`: the bar starts at 0.1, which "
-        "the loading has when there is a file, so their early ETAs read short). The writer now reports its phases "
+        "the loading has when there is a file; the ETA counts from the first call after loading). The writer now "
+        "reports its phases "
         "(motion analysis, overlap search, the group decision's blocks of runs, the keys' blocks of paths, the "
         f"text), and the 2D stage ends at {WRITE_FROM} of the bar instead of 0.6: the flat SVG's writer takes 75-90 % "
         "of a long conversion. A triangle budget reports its passes over every frame, and takes a share of the bar "
-        "sized to its work (`convert.prepared_at`). The web job page reads the same progress (and its cancel button acts at the next "
+        "sized to its work (`convert.prepared_at`). The web job page reads the same progress (and its cancel button "
+        "acts at the next "
         "update, which inside the writer used to mean at the end). "
         + __doc__.split("\n\n")[2].replace("\n", " ").replace("WRITE_FROM", str(WRITE_FROM)),
         "",
