@@ -403,6 +403,7 @@ def write(sheet: Sheet, options: ConversionOptions, report: Report, progress: Pr
             values = np.zeros((t_all + 1,) + x.shape[1:])
             values[..., cols] = reduced.values
             keys[group] = (reduced.mask, values)
+            progress("keys", 0.6 if group else 0.575)  # geometry, then colour: about the same work
         keys[True] = _hold_colours_in_range(*keys[True], active, signals)
         report.counts["gouraud_keys"] = int(sum(m.sum() for m, _ in keys.values()))
     emit = _Emit(signals, x, keys, t_all, dur)

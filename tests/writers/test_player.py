@@ -401,3 +401,18 @@ def test_a_slow_multisampled_frame_at_start_starts_the_player_without_multisampl
         assert page.evaluate("() => facesvgPlayer.msaaProbeMs") is None
     finally:
         ctx.close()
+
+
+def test_deflate_in_chunks_is_zlib_compress_with_progress():
+    from converter.writers import player
+
+    rng = np.random.default_rng(1)
+    data = np.cumsum(rng.integers(-3, 4, 3 * player.DEFLATE_CHUNK)).astype(np.int16).tobytes()  # 3 chunks x 2
+    seen = []
+    for d in (data, data[: player.DEFLATE_CHUNK], b""):
+        seen.clear()
+        assert player.deflate(d, lambda s, f: seen.append(f)) == zlib.compress(d, 9)
+        assert seen == sorted(seen) and seen[-1] == 1.0
+    seen.clear()
+    player.deflate(data, lambda s, f: seen.append(f))
+    assert len(set(seen)) == 7  # one report per chunk, then done
