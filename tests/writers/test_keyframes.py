@@ -127,3 +127,34 @@ def test_compiled_reduce_gives_the_keys_of_the_vectorised_one(seed):
     got, want = kf.reduce(x, active, eps), numpy_reduce(x, active, eps)
     assert np.array_equal(got.mask, want.mask) and np.array_equal(got.first_active, want.first_active)
     assert np.array_equal(got.values, want.values)  # bit for bit: the same arithmetic in the same order
+
+
+def numpy_uniform_check(x, active, n_keys, q, scale, radius, pairs):
+    """uniform_fit's check as numpy computed it before it was compiled (the reference)."""
+    from converter.arrays import lengths
+
+    t, n, d = x.shape
+    a = kf._hat(t, n_keys)
+    flat = x.reshape(t, n * d)
+    dev = a @ (q.reshape(n_keys, n * d) / scale) - flat
+    dev = dev.reshape(t, n, d // 2, 2) if pairs else dev.reshape(t, n, d, 1)
+    err = (lengths(dev) if pairs else np.abs(dev[..., 0])).max(axis=-1)
+    return ~(np.where(active, err, 0.0) > radius).any(axis=0)
+
+
+@pytest.mark.parametrize("pairs", [True, False])
+@pytest.mark.parametrize("n_keys", [2, 7, 40])
+def test_compiled_uniform_check_is_the_numpy_one(pairs, n_keys):
+    # Random walks with hidden frames, per-track radii around the fits' errors (both outcomes, often).
+    rng = np.random.default_rng(n_keys)
+    t, n, d = 97, 300, 6
+    x = np.cumsum(rng.normal(0, 0.3, (t, n, d)), axis=0)
+    active = rng.random((t, n)) > 0.15
+    scale = 100.0
+    outcomes = set()
+    for radius in (0.2, 1.5, rng.uniform(0.05, 4.0, n)):
+        q, ok = kf.uniform_fit(x, active, n_keys, scale, radius, pairs)
+        want = numpy_uniform_check(x, active, n_keys, q, scale, radius, pairs)
+        assert np.array_equal(ok, want)
+        outcomes |= set(want.tolist())
+    assert outcomes == {True, False}
