@@ -191,17 +191,17 @@ def extract(
         kept = visible.any(axis=0)
     progress("shade", 0.75)
     vertex_colors = vertex_colors or bool(reference_frames)  # the reference renders are Gouraud-shaded
-    # Only the kept triangles' colours are stored (no writer draws the others: on the ICT head 27k of 51k): worked
-    # out for every face, as before, then taken, so that each value keeps its bits
+    # Only the kept triangles' colours are stored and lit (no writer draws the others: on the ICT head 27k of 51k);
+    # n.l is worked out for every face, as before, then taken, so that each value keeps its bits
     kept_ids = np.flatnonzero(kept)
     face_rgb = np.empty((t, len(kept_ids), 3), np.float32)
     vertex_rgb = np.empty((t, v, 3), np.float32) if vertex_colors else None
     # decoded once, not per block of frames (0.3 s over the 4,000-frame ICT head's 500 blocks)
-    tri_linear = srgb_to_linear(anim.triangle_colors()[None])
+    tri_linear = np.take(srgb_to_linear(anim.triangle_colors()[None]), kept_ids, axis=1)
     vert_linear = srgb_to_linear(anim.face_base_colors()[None]) if vertex_rgb is not None else None
     for blk in _blocks(t):
-        face_rgb[blk] = np.take(lambert_linear(unit_face_normals(frames[blk], faces), tri_linear, camera.view,
-                                               lighting), kept_ids, axis=1)
+        face_rgb[blk] = lambert_linear(unit_face_normals(frames[blk], faces), tri_linear, camera.view, lighting,
+                                       rows=kept_ids)
         if vertex_rgb is not None:
             vertex_rgb[blk] = lambert_linear(unit_vertex_normals(frames[blk], faces), vert_linear, camera.view,
                                              lighting)

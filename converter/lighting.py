@@ -63,11 +63,17 @@ def lambert(
 
 
 def lambert_linear(
-    normals: np.ndarray, linear_rgb: np.ndarray, view: np.ndarray, lighting: Lighting = DEFAULT_LIGHTING
+    normals: np.ndarray, linear_rgb: np.ndarray, view: np.ndarray, lighting: Lighting = DEFAULT_LIGHTING,
+    rows: np.ndarray | None = None,
 ) -> np.ndarray:
-    """lambert of a base colour already decoded (srgb_to_linear): a block of frames of one mesh decodes it once."""
+    """lambert of a base colour already decoded (srgb_to_linear): a block of frames of one mesh decodes it once.
+    rows: only these of the normals (..., N, 3) are lit, linear_rgb holding their colours; n.l is still worked out
+    for every normal, then taken, so each value has the bits it has among all (BLAS's sums may depend on the row
+    count)."""
     light = light_direction_world(view, lighting).astype(np.float32)
     gain = np.asarray(np.asarray(normals, np.float32) @ light)  # an array even for one normal
+    if rows is not None:
+        gain = np.take(gain, rows, axis=-1)
     np.maximum(gain, 0.0, out=gain)  # n.l+, NaN kept (np.clip's semantics)
     gain *= lighting.diffuse
     gain += lighting.ambient

@@ -56,7 +56,8 @@ def rigid_residual(frames: np.ndarray, rounds: int = 3, progress: Progress = no_
     The fit is repeated on the half of the vertices that deform least, so a jaw opening does not tilt it.
     Every frame is fitted on its own, a block of frames at a time: compiled passes over its vertices for the
     centroids and cross-covariance, then for the residual and its length (as numpy's weighted sums, products and
-    norm they were 4.4 s of 512 frames of the ICT head, now 0.5); the 3x3 SVDs and the medians stay numpy's."""
+    norm they were 4.4 s of CPU over 512 frames of the ICT head, now 1-1.5 s all told); the 3x3 SVDs and the
+    medians stay numpy's."""
     ref = np.asarray(frames[0], np.float64)
     # Stored vertex-major, as motion_attributes reads it (one row per vertex); returned as a (T, V, 3) view
     out = np.empty((frames.shape[1], frames.shape[0], 3), np.float64).transpose(1, 0, 2)

@@ -107,3 +107,18 @@ def test_flat_colours_are_stored_for_the_kept_triangles_only(sample_path):
         sheet.face_colors(np.flatnonzero(~sheet.kept)[:1])
     with pytest.raises(ValueError, match="kept"):
         dataclasses.replace(sheet, face_rgb=every)
+
+
+def test_lighting_some_rows_gives_their_bits_among_all():
+    from converter.camera import look_at
+    from converter.lighting import lambert_linear
+
+    rng = np.random.default_rng(4)
+    normals = rng.normal(size=(5, 1001, 3)).astype(np.float32)
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    rgb = rng.random((1, 1001, 3)).astype(np.float32)
+    view = look_at(np.array([1.0, 2.0, 9.0]), np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    every = lambert_linear(normals, rgb, view)
+    for rows in (np.arange(0, 1001, 3), np.array([1000, 7, 7, 0]), np.arange(1001)):
+        got = lambert_linear(normals, rgb[:, rows], view, rows=rows)
+        assert got.shape == (5, len(rows), 3) and np.array_equal(got, every[:, rows])
