@@ -141,11 +141,12 @@ def motion_attributes(frames: np.ndarray, components: int = MOTION_COMPONENTS,
     return out
 
 
-def budget_shares(n_frames: int) -> tuple[float, float, float]:
-    """Where on the budget's own progress the motion pass starts, the simplification, and the deviation pass."""
+def budget_shares(n_frames: int) -> tuple[float, float]:
+    """Where on the budget's own progress the motion pass starts, and the deviation pass (the simplification
+    between them takes next to nothing)."""
     facing, motion = BUDGET_MS["facing"] * n_frames, BUDGET_MS["motion"] * min(n_frames, MOTION_FRAMES)
     total = facing + motion + BUDGET_MS["deviation"] * n_frames
-    return facing / total, (facing + motion) / total, (facing + motion) / total
+    return facing / total, (facing + motion) / total
 
 
 def _part_simplify(fn, positions: np.ndarray, attrs: np.ndarray, lock: np.ndarray, faces: np.ndarray,
@@ -200,7 +201,7 @@ def simplify(anim: FaceAnimation, max_triangles: int, report: Report,
              options: ConversionOptions | None = None, progress: Progress = no_progress) -> FaceAnimation:
     """The animation on a simplified mesh of at most max_triangles triangles (a subset of its vertices);
     progress through its passes over the frames (budget_shares)."""
-    motion_from, simplify_from, deviation_from = budget_shares(anim.n_frames)
+    motion_from, deviation_from = budget_shares(anim.n_frames)
     if max_triangles < 4:
         raise InputError(f"max-triangles must be at least 4, got {max_triangles}.")
     faces, part_ids = anim.faces, anim.part_ids
@@ -214,7 +215,7 @@ def simplify(anim: FaceAnimation, max_triangles: int, report: Report,
         fn = _simplify_with_attributes()
         positions = np.ascontiguousarray(anim.frames[0], np.float32)
         attrs = np.ascontiguousarray(motion_attributes(anim.frames, progress=span(progress, motion_from,
-                                                                                  simplify_from)))
+                                                                                  deviation_from)))
         parts = np.unique(part_ids)
         owners = np.zeros(anim.n_vertices, np.int64)
         for p in parts:  # vertices used by two parts stay, so the parts still meet without cracks
