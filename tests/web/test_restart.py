@@ -113,3 +113,30 @@ def test_server_stopped_mid_job_requeues_it_on_start(tmp_path):
     finally:
         proc.terminate()
         proc.wait(30)
+
+
+def test_a_job_table_from_an_older_release_gains_the_new_columns(tmp_path):
+    """A SQLite job table written before leases, clients and the ETA's origin existed opens, keeps its jobs, and
+    they run with the new fields at their defaults."""
+    import json
+    import sqlite3
+
+    from webapp.jobstore import QUEUED, SQLiteStore
+
+    path = tmp_path / "jobs.sqlite3"
+    db = sqlite3.connect(path)
+    db.execute("CREATE TABLE jobs (id TEXT PRIMARY KEY, state TEXT, stage TEXT, progress REAL, message TEXT, "
+               "filename TEXT, kind TEXT, options TEXT, files TEXT, created REAL, started REAL, finished REAL, "
+               "attempts INTEGER, result TEXT)")
+    db.execute("INSERT INTO jobs VALUES (?, ?, 'queued', 0, '', 'a.glb', 'glb', ?, ?, ?, NULL, NULL, 0, '{}')",
+               ("f" * 32, QUEUED, json.dumps({"size": 48}), json.dumps({"input": "input.glb"}), time.time()))
+    db.commit()
+    db.close()
+    store = SQLiteStore(path)
+    job = store.get("f" * 32)
+    assert (job.state, job.options, job.owner, job.lease, job.client, job.progress_origin) == \
+        (QUEUED, {"size": 48}, "", 0.0, "", {})
+    assert store.claim_next("w", 60) == "f" * 32
+    assert store.transition("f" * 32, (RUNNING,), holder="w", progress_origin={"time": 5.0, "progress": 0.05})
+    assert store.get("f" * 32).progress_origin == {"time": 5.0, "progress": 0.05}
+    store.close()
