@@ -79,11 +79,15 @@ class Eta:
         self.origin: tuple[float, float] | None = None  # (time, fraction) the extrapolation counts from
         self.loading = True
 
-    def __call__(self, stage: str, fraction: float, now: float) -> float | None:
+    def see(self, stage: str, fraction: float, now: float) -> tuple[float, float]:
+        """Note a progress call (every one: where loading ended must not be missed); the origin so far."""
         if self.origin is None or (self.loading and stage not in LOAD_STAGES):
             self.origin = (now, fraction)
             self.loading = stage in LOAD_STAGES
-        return seconds_left_since(self.origin, fraction, now)
+        return self.origin
+
+    def __call__(self, stage: str, fraction: float, now: float) -> float | None:
+        return seconds_left_since(self.see(stage, fraction, now), fraction, now)
 
 
 def seconds_left_since(origin: tuple[float, float], fraction: float, now: float) -> float | None:

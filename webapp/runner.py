@@ -141,15 +141,15 @@ class ProgressRecorder:
     def __call__(self, stage: str, fraction: float) -> None:
         if self.lost is not None and self.lost.is_set():
             raise ClaimLost()
-        self.eta(stage, fraction, time.time())  # every call: it must see where loading ended
+        origin = self.eta.see(stage, fraction, time.time())
         now = time.monotonic()
         if now - self.last < self.interval and fraction < 1.0:
             return
         self.last = now
         fraction = float(min(max(fraction, 0.0), 1.0))
         extra = {}
-        if not self.eta.loading and not self.origin_saved and self.eta.origin is not None:
-            extra["progress_origin"] = {"time": self.eta.origin[0], "progress": round(self.eta.origin[1], 4)}
+        if not self.eta.loading and not self.origin_saved:
+            extra["progress_origin"] = {"time": origin[0], "progress": round(origin[1], 4)}
             self.origin_saved = True
         if not self.store.transition(self.job_id, (RUNNING,), holder=self.owner, stage=stage,
                                      progress=round(fraction, 4), **extra):
