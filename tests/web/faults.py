@@ -131,6 +131,7 @@ class Outcome:
     failed: int = 0
     lost: int = 0  # still queued/running at the deadline ("stuck")
     duplicated: int = 0  # recorded done more than once, or listed twice
+    unlogged: int = 0  # done, but no final event: its worker was killed between recording it and the log line
     deleted: int = 0  # vanished from the table
     invalid: int = 0  # done without a valid SVG, or failed without a clear message
     seconds: float = 0.0
@@ -207,8 +208,10 @@ def judge(url: str, ids: list[str], states: dict, storage: Path | None, out: Out
         finals = [e for e in events if e in ("done", "failed")]
         if job["state"] == "done":
             out.done += 1
-            if storage is not None and finals != ["done"]:
+            if storage is not None and finals and finals != ["done"]:
                 out.duplicated += 1
+            elif storage is not None and not finals:  # two writes (the store, then the log): a kill can fall between
+                out.unlogged += 1
             svg = requests.get(f"{url}/api/v1/jobs/{job_id}/result", timeout=10).content
             try:
                 if not etree.fromstring(svg).tag.endswith("svg"):

@@ -21,6 +21,7 @@ def test_kills_on_the_embedded_backend_lose_nothing(tmp_path, seed):
     out = embedded_run(tmp_path / "inst", seed, n=20, kills=2)
     assert out.jobs == 20 and sum(out.kills.values()) == 2
     assert (out.lost, out.duplicated, out.deleted, out.invalid) == (0, 0, 0, 0), out
+    assert out.unlogged <= 2 * sum(out.kills.values()), out  # at most a job per killed worker (2 per server kill)
     assert out.done + out.failed == 20
     assert out.done >= 18, out  # a job fails only if its worker was killed on both attempts
     for message in out.messages:
@@ -36,7 +37,8 @@ def test_second_serve_on_the_same_folder_exits_and_touches_nothing(tmp_path):
     for job_id, (state, owner, attempts) in before.items():
         if state == "running":
             assert after[job_id][1:] == (owner, attempts) or after[job_id][0] in ("done", "failed")
-    assert (out.done, out.failed, out.lost, out.duplicated, out.deleted, out.invalid) == (20, 0, 0, 0, 0, 0), out
+    assert (out.done, out.failed, out.lost, out.duplicated, out.deleted, out.invalid, out.unlogged) == \
+        (20, 0, 0, 0, 0, 0, 0), out
 
 
 @pytest.mark.parametrize("seed", [1])
@@ -45,6 +47,7 @@ def test_killed_rq_workers_lose_nothing(tmp_path, redis_url, seed):
     logs = f"{out}; the RQ workers' logs: {tmp_path}/rq-worker-*.log"
     assert out.jobs == 20 and sum(out.kills.values()) == 2
     assert (out.lost, out.duplicated, out.deleted, out.invalid) == (0, 0, 0, 0), logs
+    assert out.unlogged <= 2 * sum(out.kills.values()), logs
     assert out.done >= 18, logs
 
 
