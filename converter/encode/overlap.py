@@ -9,6 +9,8 @@ loop numpy cannot express, so it is compiled with numba. Arithmetic is float32, 
 
 from __future__ import annotations
 
+from functools import partial
+
 import numba
 import numpy as np
 
@@ -157,11 +159,14 @@ def _entries(lo, hi, cell):
 
 
 @numba.njit(cache=True, nogil=True)
-def _candidates(key, owner, box, band, flag, idx, table, shift, nb, out):
+def _candidates(key, owner, box, band, flag, idx, table, shift, nb, out, first, last):
     """Pairs (a < b) of boxes of different band that meet and whose paths (idx[a], idx[b]) are not yet in the
-    PairSet table, as (buffer, M): the pairs are buffer[:M], buffer being out (K, 2) or, when more than K pairs
-    come, a larger one, which the caller passes in for the next block (a fresh buffer per block, grown by
-    doubling, faulted in ~1.5 GB over the 128k-triangle face's 67 blocks).
+    PairSet table, from the cells whose first entry lies in first..last-1, as (buffer, M): the pairs are
+    buffer[:M], buffer being out (K, 2) or, when more than K pairs come, a larger one, which the caller passes in
+    for the next block (a fresh buffer per block, grown by doubling, faulted in ~1.5 GB over the 128k-triangle
+    face's 67 blocks). Each cell is read by the one call whose slice holds its first entry, so calls on slices
+    of the entries find the pairs of one call on all of them, in the same order, and may run at once (the table
+    is only read).
 
     From the entries of _cell_lists: a cell's boxes of one band are consecutive, so only pairs across its bands
     are looked at, and a cell inside one band costs one pass (on the 128k-triangle face, 43 % of the cells and half
@@ -171,8 +176,10 @@ def _candidates(key, owner, box, band, flag, idx, table, shift, nb, out):
     both cover when they meet: there, in x and in y, the cell is the lowest of one of the two boxes."""
     near = np.empty(len(key), np.bool_)
     m = 0
-    start = 0
-    while start < len(key):
+    start = first
+    while 0 < start < len(key) and key[start] == key[start - 1]:  # a cell begun before first: not this call's
+        start += 1
+    while start < min(last, len(key)):
         stop = start + 1
         while stop < len(key) and key[stop] == key[start]:
             stop += 1
@@ -458,7 +465,7 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = 
     order = screen_order(_frame_triangles(xy32, corners, 0).mean(axis=1)) if t else np.arange(p)
     band = band[order] if band is not None else None
     found = PairSet(p)
-    buffer = np.empty((p, 2), np.int64)  # _candidates' pairs, reused (and grown) block to block
+    buffers: list[np.ndarray] = []  # _candidates' pairs, a buffer per thread, reused (and grown) block to block
     for k0 in range(0, t, block):
         progress("overlap", k0 / t)
         act = np.take(active[k0:k0 + block], order, axis=1)
@@ -475,10 +482,15 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = 
         del seen
         cell = max(CELL_BOXES * float(np.median((hi - lo).max(axis=1))), 1.0)
         own_band = band[idx] if band is not None else np.arange(len(idx))  # most neighbours share a band
-        # Only pairs not found in an earlier block come back, to be tested.
-        buffer, m = _candidates(*_cell_lists(lo, hi, cell, own_band), idx, found.table, found.shift, found.tiles,
-                                buffer)
-        fresh = buffer[:m]
+        # Only pairs not found in an earlier block come back, to be tested. The cells are shared among the threads
+        # (a slice of the entries each, each with a buffer of its own).
+        cells = _cell_lists(lo, hi, cell, own_band)
+        parts = parallel.slices(len(cells[0]))
+        buffers += [np.empty((p // len(parts) + 1, 2), np.int64) for _ in range(len(parts) - len(buffers))]
+        got = parallel.run([partial(_candidates, *cells, idx, found.table, found.shift, found.tiles, buffers[i], a, b)
+                            for i, (a, b) in enumerate(parts)])
+        buffers[:len(got)] = [buf for buf, _ in got]
+        fresh = np.concatenate([buf[:m] for buf, m in got]) if len(got) > 1 else got[0][0][:got[0][1]]
         la, lb = fresh[:, 0], fresh[:, 1]
         meet = np.zeros(len(fresh), bool)
         if len(fresh):

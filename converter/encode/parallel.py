@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from contextlib import AbstractContextManager
+from functools import partial
+from typing import TypeVar
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 THREADS = max(1, min(4, os.cpu_count() or 1))
+T = TypeVar("T")
 
 
 _pool: tuple[int, ThreadPoolExecutor] | None = None  # (pid that made it, pool): a forked child makes its own
@@ -25,21 +28,31 @@ def _helpers() -> ThreadPoolExecutor:
     return _pool[1]
 
 
+def slices(n: int) -> list[tuple[int, int]]:
+    """range(n) cut into up to THREADS consecutive slices (first, stop), as even as can be."""
+    threads = max(1, min(THREADS, n))
+    bounds = np.linspace(0, n, threads + 1).astype(np.int64).tolist()
+    return list(zip(bounds[:-1], bounds[1:]))
+
+
+def run(calls: list[Callable[[], T]]) -> list[T]:
+    """Each call's result, in order: the first call on this thread, the others on the helpers, which must release
+    the GIL to run alongside; returns (or raises the first call's error) only once every call has finished."""
+    if len(calls) <= 1:
+        return [c() for c in calls]
+    pool = _helpers()
+    rest = [pool.submit(c) for c in calls[1:]]
+    try:
+        first = calls[0]()
+    finally:  # the others write into the same arrays: they all finish before this returns or raises
+        wait(rest)
+    return [first, *(f.result() for f in rest)]
+
+
 def threaded(kernel: Callable[..., None], n: int, *args) -> None:
     """kernel(*args, first, stop) for THREADS slices first..stop of range(n), the first on this thread; the
     kernel must release the GIL."""
-    threads = max(1, min(THREADS, n))
-    bounds = np.linspace(0, n, threads + 1).astype(np.int64).tolist()
-    if threads == 1:
-        kernel(*args, 0, n)
-        return
-    pool = _helpers()
-    rest = [pool.submit(kernel, *args, bounds[i], bounds[i + 1]) for i in range(1, threads)]
-    try:
-        kernel(*args, bounds[0], bounds[1])
-    finally:  # the others write into the same arrays: they finish before this returns or raises
-        for f in rest:
-            f.result()
+    run([partial(kernel, *args, a, b) for a, b in slices(n)])
 
 
 def serial_blas() -> AbstractContextManager:

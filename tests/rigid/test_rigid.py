@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from converter import verify
-from converter.encode import freeknots, groups, overlap, robust_affine
+from converter.encode import freeknots, groups, overlap, parallel, robust_affine
 from converter.encode import keys as keyframes
 from converter.encode import order as order_mod
 from converter.encode.budget import ErrorBudget
@@ -255,13 +255,15 @@ def test_screen_order_numbers_neighbours_near():
     assert np.median(step) == 1 and step.mean() < 2.5
 
 
-@pytest.mark.parametrize(("grows", "bands"), [(False, 2), (True, 2), (False, 7)])
-def test_overlap_pairs_match_every_pair_tested_by_brute_force(monkeypatch, grows, bands):
+@pytest.mark.parametrize(("grows", "bands", "threads"), [(False, 2, 2), (True, 2, 1), (False, 7, 3), (False, 2, 4)])
+def test_overlap_pairs_match_every_pair_tested_by_brute_force(monkeypatch, grows, bands, threads):
     # Random small triangles over a few blocks of frames, some hidden, in bands: the grid candidates (a cell's
-    # boxes grouped by band, only pairs across its bands looked at), their per-cell reporting and the dedupe
-    # across blocks (a PairSet, starting at 2 slots when it grows) against testing every pair.
+    # boxes grouped by band, only pairs across its bands looked at), their per-cell reporting, the cells shared
+    # among threads (a slice of the entries each: a cell across two slices is read once) and the dedupe across
+    # blocks (a PairSet, starting at 2 slots when it grows) against testing every pair.
     if grows:
         monkeypatch.setattr(overlap, "PAIRSET_BITS", 1)
+    monkeypatch.setattr(parallel, "THREADS", threads)
     rng = np.random.default_rng(11)
     t, p = 20, 60
     centre = rng.uniform(0, 60, (1, p, 1, 2)) + np.cumsum(rng.normal(0, 1.0, (t, p, 1, 2)), axis=0)
@@ -288,6 +290,29 @@ def test_overlap_pairs_match_every_pair_tested_by_brute_force(monkeypatch, grows
     corners = np.arange(p * 3).reshape(p, 3)
     shared = overlap.overlap_pairs(verts, active, block=8, margin=0.5, band=band, corners=corners)
     assert {tuple(e) for e in shared.tolist()} == want
+
+
+def test_candidates_of_slices_of_the_entries_are_those_of_all_of_them():
+    # Each cell is read by the call whose slice holds its first entry: cut anywhere, two calls give the one call's
+    # pairs, in its order (none lost, none twice), whichever buffer size they start with.
+    rng = np.random.default_rng(5)
+    lo = rng.uniform(0, 40, (80, 2)).astype(np.float32)
+    hi = lo + rng.uniform(0.5, 6, (80, 2)).astype(np.float32)
+    cells = overlap._cell_lists(lo, hi, 4.0, rng.integers(0, 3, 80))
+    found = overlap.PairSet(80)
+    idx = np.arange(80)
+    n = len(cells[0])
+
+    def pairs(first, last, k=4):
+        buf, m = overlap._candidates(*cells, idx, found.table, found.shift, found.tiles, np.empty((k, 2), np.int64),
+                                     first, last)
+        return buf[:m].tolist()
+
+    whole = pairs(0, n)
+    assert len(whole) > 20 and len(set(map(tuple, whole))) == len(whole)
+    assert (np.diff(cells[0]) == 0).sum() > 20  # cells of several entries, which most cuts fall inside
+    for cut in range(n + 1):
+        assert pairs(0, cut, 1) + pairs(cut, n, 64) == whole
 
 
 def test_overlap_pairs_with_a_drift_taken_off_are_the_same_pairs():
