@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import datetime
 import importlib
+import importlib.metadata
 import os
 import platform
 import subprocess
@@ -38,7 +39,20 @@ def machine() -> str:
         mem = f", {kb / 1048576:.0f} GiB RAM"
     except (OSError, ValueError, IndexError):
         pass
-    return f"{cpu}, {os.cpu_count()} cores{mem}, Python {platform.python_version()}, Mesa llvmpipe (EGL, software GL)"
+    return (f"{cpu}, {os.cpu_count()} cores{mem}, Linux {platform.release()}, Python {platform.python_version()} "
+            f"({libraries()}), Mesa llvmpipe (EGL, software GL)")
+
+
+def libraries() -> str:
+    """The installed versions of the libraries the conversion's speed and memory depend on (unpinned: a fresh
+    install takes the newest, so figures from two days may differ by them)."""
+    found = []
+    for name in ("numpy", "scipy", "numba", "llvmlite", "meshoptimizer"):
+        try:
+            found.append(f"{name} {importlib.metadata.version(name)}")
+        except importlib.metadata.PackageNotFoundError:
+            found.append(f"{name} -")
+    return ", ".join(found)
 
 
 def sections() -> list[str]:
@@ -60,7 +74,8 @@ def main(argv: list[str]) -> int:
         t = time.perf_counter()
         body = mod.run()
         stamp = datetime.date.today().isoformat()
-        text = f"## {mod.TITLE}\n\n_Measured {stamp} in {time.perf_counter() - t:.0f} s by `python bench/run.py {name}`._\n\n{body.strip()}\n"
+        text = (f"## {mod.TITLE}\n\n_Measured {stamp} in {time.perf_counter() - t:.0f} s by `python bench/run.py {name}` "
+                f"(Linux {platform.release()}; {libraries()})._\n\n{body.strip()}\n")
         (HERE / "results" / f"{name}.md").write_text(text)
         print(body, flush=True)
     assemble()
@@ -76,7 +91,7 @@ def assemble() -> None:
     parts = [
         "# BENCHMARKS\n",
         f"Written by `make bench` on {datetime.date.today().isoformat()} (commit {rev or '?'}).\n",
-        f"Machine: {machine()}.\n",
+        f"Machine: {machine()}. Each section names the kernel and libraries it was measured with.\n",
         "Times are medians of the repeats each section states; sizes and deviations are exact.\n",
     ]
     for name in sections():
