@@ -26,6 +26,7 @@ from converter.formats.ictfacekit import load_ict_head
 from converter.formats.obj import parse_obj, parse_obj_vertices
 from converter.formats.objseq import check_entries, material_colors, natural_key, read
 from converter.formats.parts import parts_for_groups
+from converter.options import Progress, no_progress
 from converter.userfiles import read_bytes
 
 NEUTRAL_NAMES = ("neutral", "base", "basis", "rest", "generic_neutral_mesh")
@@ -53,19 +54,20 @@ class MorphFace:
                              vertex_colors=self.vertex_colors, extras=dict(self.extras))
 
 
-def load_morph_face(path: str | Path) -> MorphFace:
+def load_morph_face(path: str | Path, progress: Progress = no_progress) -> MorphFace:
     """A face with named morph targets from a glTF/GLB, a zip of OBJ shapes (neutral.obj + jawOpen.obj ...), or
-    an ICT FaceKit folder."""
+    an ICT FaceKit folder; progress("load", fraction of its shapes read) after each shape of the last two (an
+    ICT head's are 3 s of parsing)."""
     path = Path(path)
     if path.is_dir():
-        return from_ict(path)
+        return from_ict(path, progress)
     data = read_bytes(path, "face")
     if not data:
         raise InputError(f"{path.name} is empty.")
     if data[:4] == b"glTF" or data.lstrip()[:1] == b"{":
         return from_gltf(data, path.parent, path.stem)
     if data[:4] in (b"PK\x03\x04", b"PK\x05\x06"):
-        return from_obj_zip(data, path.stem)
+        return from_obj_zip(data, path.stem, progress)
     raise InputError(f"{path.name} has no named morph targets to drive; give a glTF/GLB with targetNames, a zip of "
                      "OBJ shapes (neutral.obj, jawOpen.obj, ...) or an ICT FaceKit folder.")
 
@@ -158,10 +160,11 @@ def _repack(doc: dict, bin_chunk, binary: bool) -> bytes:
     return struct.pack("<4sII", b"glTF", 2, 12 + len(chunks)) + chunks
 
 
-def from_obj_zip(data: bytes, name: str = "face") -> MorphFace:
+def from_obj_zip(data: bytes, name: str = "face", progress: Progress = no_progress) -> MorphFace:
     """A zip of one neutral OBJ (neutral/base/basis.obj) and one OBJ per shape named for it (jawOpen.obj, ...).
 
     Shapes may be gzipped (.obj.gz) and must share the neutral's vertex order; each is an absolute mesh.
+    progress("load", fraction of the shapes read) after each.
     """
     try:
         zf = zipfile.ZipFile(io.BytesIO(data))
@@ -187,16 +190,20 @@ def from_obj_zip(data: bytes, name: str = "face") -> MorphFace:
             raise InputError(f"{info.filename} has {len(v)} vertices but {neutral[0].filename} has {len(base)}; "
                              "every shape must keep the neutral's vertices in order.")
         deltas[k] = v - base
+        progress("load", (k + 1) / len(shapes))
     parts, part_ids = parts_for_groups(groups, group_of_face, material_colors(zf, check_entries(infos, name), name))
     return MorphFace(base, deltas, [stems[i.filename] for i in shapes], faces, part_ids, parts, name)
 
 
-def from_ict(folder: Path) -> MorphFace:
-    """The ICT FaceKit head and all its expression shapes (deltas from the neutral)."""
+def from_ict(folder: Path, progress: Progress = no_progress) -> MorphFace:
+    """The ICT FaceKit head and all its expression shapes (deltas from the neutral); progress("load", fraction
+    of the shapes read) after each."""
     head = load_ict_head(folder)
     names = head.expression_names()
-    empty = np.zeros((0, len(head.vertices), 3), np.float32)
-    deltas = np.stack([head.delta(n) for n in names]).astype(np.float32) if names else empty
+    deltas = np.zeros((len(names), len(head.vertices), 3), np.float32)
+    for k, n in enumerate(names):
+        deltas[k] = head.delta(n)
+        progress("load", (k + 1) / len(names))
     return MorphFace(head.vertices, deltas, names, head.faces, head.part_ids, head.parts, folder.name,
                      extras={"morph_targets": names})
 

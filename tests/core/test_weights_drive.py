@@ -186,7 +186,9 @@ def test_head_yaw_rotates_the_face_rigidly_about_the_centre(tmp_path, sample_pat
 @pytest.mark.slow
 def test_a_4000_frame_capture_converts(tmp_path, shared_data):
     """Two minutes at 60 fps... of a 26,719-vertex head: the 3D stage only (the writers have their own benches)."""
-    face = load_morph_face(shared_data / "ict_facekit")
+    read = []
+    face = load_morph_face(shared_data / "ict_facekit", progress=lambda stage, f: read.append(f))
+    assert read == [(k + 1) / 27 for k in range(27)]  # a step per expression shape
     path = tmp_path / "long.csv"
     arkit = ["JawOpen", "EyeBlinkLeft", "EyeBlinkRight", "MouthSmileLeft", "MouthSmileRight", "BrowInnerUp"]
     w = synthetic_llf(path, 4000, arkit)
@@ -218,13 +220,20 @@ def test_obj_zip_face_by_shape_name(tmp_path):
         zf.writestr("face/neutral.obj", obj(v))
         zf.writestr("face/jawOpen.obj", obj(v + [0, -1, 0]))
         zf.writestr("face/eyeBlink_L.obj", obj(v + [0, 0, 0.5]))
-    face = load_morph_face(path)
+    calls = []
+    face = load_morph_face(path, progress=lambda stage, f: calls.append((stage, f)))
     assert face.names == ["eyeBlink_L", "jawOpen"]
+    assert calls == [("load", 0.5), ("load", 1.0)]  # a step per shape read
     csv_path = tmp_path / "w.json"
     names = ["jawOpen", "eyeBlinkLeft", "tongueOut"]
     csv_path.write_text(json.dumps({"exportFps": 10, "numFrames": 2, "facsNames": names,
                                     "weightMat": [[0.0, 1.0, 0.3], [0.5, 0.0, 0.3]]}))
     anim = blendshapes.drive(face, read_weights(csv_path))
+    calls.clear()
+    by_file = blendshapes.drive_file(path, csv_path, progress=lambda stage, f: calls.append((stage, f)))
+    np.testing.assert_array_equal(by_file.frames, anim.frames)
+    share = blendshapes.FACE_READ_SHARE  # reading the face, then driving it
+    assert calls == [("load", share / 2), ("load", share), ("weights", 1.0)]
     np.testing.assert_allclose(anim.frames[0], v + [0, 0, 0.5], atol=1e-6)
     np.testing.assert_allclose(anim.frames[1], v + [0, -0.5, 0], atol=1e-6)
     assert anim.extras["weights"]["counts"]["weights_unmatched"] == 1
