@@ -1,5 +1,6 @@
-"""parallel.threaded: every slice once, helpers kept across calls, none left running when a slice raises, and a
-forked child gets helpers of its own (a pool's threads do not survive fork)."""
+"""parallel.threaded: every slice once, helpers kept across calls, a slow slice does not hold the other thread,
+none left running when a slice raises, and a forked child gets helpers of its own (a pool's threads do not
+survive fork)."""
 
 import os
 import select
@@ -30,18 +31,35 @@ def two(monkeypatch):
     monkeypatch.setattr(parallel, "THREADS", 2)
 
 
-def test_every_item_once_on_this_thread_and_one_helper_kept_across_calls(two):
+def test_every_item_once_and_one_helper_kept_across_calls(two):
     out, tid = np.zeros(101, np.int64), np.zeros(101, np.int64)
     parallel.threaded(_fill, 101, out, tid)
     assert (out == 1).all()
-    assert set(tid[:50].tolist()) == {threading.get_ident()} and threading.get_ident() not in tid[51:]
-    helper = int(tid[-1])
+    pool = parallel._pool
     parallel.threaded(_fill, 101, out, tid)
-    assert (out == 2).all() and int(tid[-1]) == helper  # the same helper: no thread started per call
+    assert (out == 2).all() and parallel._pool is pool  # the same helper: no thread started per call
     x = np.arange(1000, dtype=np.float64)
     sq = np.empty_like(x)
     parallel.threaded(_square, len(x), x, sq)
     assert np.array_equal(sq, x * x)
+
+
+def test_a_slow_slice_does_not_keep_the_other_thread_waiting(two):
+    # The first slice of 2 x PIECES takes 0.5 s: the thread that took it does nothing else, the other takes every
+    # other slice (halves would have given one thread the slow slice and a half's worth more).
+    n = 16 * parallel.PIECES
+    out, tid = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    first_stop = n // (2 * parallel.PIECES)
+
+    def kernel(out, tid, first, stop):
+        if first == 0:
+            time.sleep(0.5)
+        _fill(out, tid, first, stop)
+
+    parallel.threaded(kernel, n, out, tid)
+    assert (out == 1).all()
+    slow = set(tid[:first_stop].tolist())
+    assert len(slow) == 1 and not slow & set(tid[first_stop:].tolist())
 
 
 def test_a_slice_that_raises_returns_only_after_the_others_finished(two):
@@ -50,12 +68,18 @@ def test_a_slice_that_raises_returns_only_after_the_others_finished(two):
     def kernel(first, stop):
         if first == 0:
             raise ValueError("slice 0")
-        time.sleep(0.2)
+        time.sleep(0.05)
         done.append(stop)
 
     with pytest.raises(ValueError, match="slice 0"):
-        parallel.threaded(kernel, 10)
-    assert done == [10]
+        parallel.threaded(kernel, 40)
+    assert sorted(done) == np.linspace(0, 40, 2 * parallel.PIECES + 1).astype(int)[2:].tolist()
+
+
+def test_slices_cut_the_range_evenly_for_the_threads(two):
+    assert parallel.slices(10) == [(0, 5), (5, 10)]
+    assert parallel.slices(1) == [(0, 1)]
+    assert parallel.run([lambda: 1, lambda: 2, lambda: 3]) == [1, 2, 3]  # results in order, a call per helper
 
 
 def test_a_forked_child_makes_helpers_of_its_own(two):
