@@ -331,3 +331,13 @@ def test_offsets_shorten_keys_only_where_they_pay():
     for a, b in zip(plain, moved):
         assert np.allclose(np.array(_triangles_of_d(a)), np.array(_triangles_of_d(b)) + np.tile(off[0], 3))
 
+
+
+def test_hex_colours_are_python_s_lowercase_six_digits():
+    rng = np.random.default_rng(3)
+    levels = np.concatenate([[[0, 0, 0], [255, 255, 255], [0, 0, 15], [16, 0, 0]], rng.integers(0, 256, (500, 3))])
+    want = [f"#{r:02x}{g:02x}{b:02x}" for r, g, b in levels.tolist()]
+    assert svg_anim._hex(levels).tolist() == want
+    assert svg_anim._hex(levels.astype(np.uint8)).tolist() == want  # narrow levels do not overflow the shifts
+    assert svg_anim._hex(levels[:4].reshape(2, 2, 3)).tolist() == [want[:2], want[2:4]]
+    assert svg_anim._hex(np.zeros((0, 3), np.int64)).tolist() == []
