@@ -490,10 +490,10 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = 
         got = parallel.run([partial(_candidates, *cells, idx, found.table, found.shift, found.tiles, buffers[i], a, b)
                             for i, (a, b) in enumerate(parts)])
         buffers[:len(got)] = [buf for buf, _ in got]
-        fresh = np.concatenate([buf[:m] for buf, m in got]) if len(got) > 1 else got[0][0][:got[0][1]]
-        la, lb = fresh[:, 0], fresh[:, 1]
-        meet = np.zeros(len(fresh), bool)
-        if len(fresh):
-            parallel.threaded(_meet, len(fresh), pts, on, la, lb, m32, meet)
-        found.add(idx[la[meet]], idx[lb[meet]])
+        for buf, m in got:  # each slice's candidates tested where they lie (no joined copy)
+            la, lb = buf[:m, 0], buf[:m, 1]
+            meet = np.zeros(m, bool)
+            if m:
+                parallel.threaded(_meet, m, pts, on, la, lb, m32, meet)
+            found.add(idx[la[meet]], idx[lb[meet]])
     return found.pairs(order)
