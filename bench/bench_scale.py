@@ -18,7 +18,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import resource
 import subprocess
 import sys
 import tempfile
@@ -159,7 +158,7 @@ def child(frames: int, triangles: int, subdivisions: int, mode: str) -> dict:
         convert_animation(anim, ConversionOptions())
         return {"cpu": usage.cpu() - c, "peak_mb": usage.peak_mb()}
     anim = arkit_face(frames) if triangles == ARKIT[1] else load_face(face_file(frames, triangles, subdivisions))
-    before_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    before_mb = usage.own_peak_mb()
     if mode == "naive":
         c = usage.cpu()
         sheet = extract_sheet(anim, ConversionOptions(), Report())
@@ -259,7 +258,7 @@ def run() -> str:
         "threads, plus any process it forks: `bench/usage.py`; the face's generation excluded). The cases with a CPU target "
         f"(capture-like, 8k x 3,000, 128k) are each mode's median run by CPU of {MEDIAN_RUNS} (since 2026-12-06; before, "
         "the capture-like face's alone), the other cases one run each (the machine, 2 cores, was shared with other "
-        "engineers' jobs: single runs scatter by 10-20 %). Peak MB is the larger of the child's `ru_maxrss`, any forked child's, and the "
+        "engineers' jobs: single runs scatter by 10-20 %). Peak MB is the larger of the child's high-water RSS (VmHWM; since 2026-12-07 not its `ru_maxrss`, which Linux starts at the spawning parent's size), any forked child's, and the "
         "sampled peak of the sum of their PSS (shared pages counted once, every 20 ms while a child lives: "
         "`usage.TreePss`; since 2026-12-06 not while the conversion runs alone, where reading its PSS took the bench "
         "a third of a core and contended with the conversion's page faults). The child loads its face from an .npz that a process of its "

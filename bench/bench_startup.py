@@ -83,7 +83,7 @@ def run() -> str:
         "empty for a fresh install, else a copy of one that `facesvg warm` filled. `make setup` runs `facesvg warm` "
         "(and again, `--fresh`, whenever a kernel's source changes), so `make run`'s conversion and every later "
         "one start warm; a `pip install` user runs it once (README). CPU is user+sys of the process and its "
-        "threads (and any child it waits for); peak is its ru_maxrss (`bench/usage.py`).",
+        "threads (and any child it waits for); peak is its high-water RSS (VmHWM, `bench/usage.py`; ru_maxrss would start at the bench parent's size).",
         "",
         *rows,
         "",

@@ -1,13 +1,12 @@
 """ARKit weight captures driving a face: names matched on the ICT head, and a 4,000-frame capture's cost.
 
-The 4,000-frame run happens in a child process so its peak RSS is its own (ru_maxrss of the child).
+The 4,000-frame run happens in a child process so its peak RSS is its own (the child's VmHWM, bench/usage.py).
 """
 
 from __future__ import annotations
 
 import csv
 import json
-import resource
 import subprocess
 import sys
 import tempfile
@@ -63,7 +62,7 @@ def child(n_frames: int) -> None:
         c3, t3 = time.process_time(), time.perf_counter()
     print(json.dumps({"frames": anim.n_frames, "vertices": anim.n_vertices, "load_cpu": c1 - c0,
                       "read_cpu": c2 - c1, "drive_cpu": c3 - c2, "wall": t3 - t0,
-                      "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                      "rss_mb": usage.own_peak_mb(),
                       "frames_mb": anim.frames.nbytes / 2 ** 20}))
 
 

@@ -3,6 +3,7 @@ until 2026-12-06; a child's share would be missing from this process's own clock
 
     c = usage.cpu(); work(); seconds = usage.cpu() - c      # user+sys of this process and its waited-for children
     usage.peak_mb()                                          # the larger of this process's and any child's peak RSS
+    usage.own_peak_mb()                                      # this process's (its VmHWM: see peak_mb)
     with usage.TreePss(pid) as tree: ...; tree.peak_mb      # sampled peak of the sum of a process tree's PSS
     out, mb = usage.run_measured(cmd)                       # subprocess.run, and that peak of its tree
 
@@ -11,7 +12,7 @@ pages would count twice) nor does the larger bound the machine's use (the child'
 parent's). The sum of the tree's proportional set sizes (PSS: each shared page split between its sharers) is what
 the machine holds; TreePss samples it from outside the measured processes, every 20 ms, so it misses spikes
 shorter than that. Reading a process's PSS walks its whole page table under its memory-map lock, so run_measured
-samples only while the process has children: a lone process's peak is its own ru_maxrss, exact and free. (Sampling
+samples only while the process has children: a lone process's peak is its own high-water mark, exact and free. (Sampling
 throughout took the bench parent a third of a core on a 2-core machine, against a 2-9 GB conversion whose page
 faults waited on that lock.)
 """
@@ -31,9 +32,23 @@ def cpu() -> float:
 
 
 def peak_mb() -> float:
-    """The larger of this process's peak RSS and its largest waited-for child's, in MiB."""
-    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return max(own.ru_maxrss, kids.ru_maxrss) / 1024
+    """The larger of this process's peak RSS and its largest waited-for child's, in MiB.
+
+    This process's own is its memory map's high-water mark (VmHWM), not ru_maxrss: Linux carries the RSS of the
+    process that spawned this one into ru_maxrss at exec (a child of a 425 MB parent reported 425 MB with a high
+    water of 11 MB), so a measured child of a bench parent grown large would report the parent's size."""
+    return max(own_peak_mb(), resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024)
+
+
+def own_peak_mb() -> float:
+    """This process's peak RSS in MiB: its VmHWM (peak_mb), ru_maxrss where /proc does not tell."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def _tree(pid: int) -> list[int]:

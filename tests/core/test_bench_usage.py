@@ -4,6 +4,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 from bench import usage
 
@@ -40,3 +41,14 @@ def test_tree_sampler_reads_nothing_while_the_process_is_alone():
                 time.sleep(0.02)
         proc.wait()
     assert tree.peak_mb > 60
+
+
+def test_a_child_s_peak_is_its_own_not_the_size_of_the_process_that_spawned_it():
+    # Linux carries the spawning process's RSS into the child's ru_maxrss at exec: a bench parent grown to 200 MB
+    # would make every measured child report at least 200 MB. usage.peak_mb reads the child's own high water.
+    big = b"\x01" * (200 << 20)  # every page written
+    code = "from bench import usage; import resource; print(usage.peak_mb(), resource.getrusage(0).ru_maxrss / 1024)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=str(Path(usage.__file__).resolve().parents[1]))
+    own, maxrss = map(float, out.stdout.split())
+    assert len(big) and maxrss > 200 and own < 100
