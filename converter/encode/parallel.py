@@ -29,10 +29,9 @@ def _helpers() -> ThreadPoolExecutor:
     return _pool[1]
 
 
-def slices(n: int) -> list[tuple[int, int]]:
-    """range(n) cut into up to THREADS consecutive slices (first, stop), as even as can be."""
-    threads = max(1, min(THREADS, n))
-    bounds = np.linspace(0, n, threads + 1).astype(np.int64).tolist()
+def slices(n: int, per_thread: int = 1) -> list[tuple[int, int]]:
+    """range(n) cut into up to THREADS x per_thread consecutive slices (first, stop), as even as can be."""
+    bounds = np.linspace(0, n, max(1, min(THREADS * per_thread, n)) + 1).astype(np.int64).tolist()
     return list(zip(bounds[:-1], bounds[1:]))
 
 
@@ -59,13 +58,12 @@ def threaded(kernel: Callable[..., None], n: int, *args) -> None:
     if threads == 1:
         kernel(*args, 0, n)
         return
-    pieces = min(n, threads * PIECES)
-    bounds = np.linspace(0, n, pieces + 1).astype(np.int64).tolist()
+    pieces = slices(n, PIECES)
     taken = itertools.count()  # next() on it is atomic under the GIL
 
     def worker() -> None:
-        while (i := next(taken)) < pieces:
-            kernel(*args, bounds[i], bounds[i + 1])
+        while (i := next(taken)) < len(pieces):
+            kernel(*args, *pieces[i])
 
     run([worker] * threads)
 

@@ -78,7 +78,8 @@ def test_a_slice_that_raises_returns_only_after_the_others_finished(two):
 
 def test_slices_cut_the_range_evenly_for_the_threads(two):
     assert parallel.slices(10) == [(0, 5), (5, 10)]
-    assert parallel.slices(1) == [(0, 1)]
+    assert parallel.slices(1) == [(0, 1)] and parallel.slices(0) == [(0, 0)]
+    assert parallel.slices(10, 2) == [(0, 2), (2, 5), (5, 7), (7, 10)]  # per_thread slices a thread
     assert parallel.run([lambda: 1, lambda: 2, lambda: 3]) == [1, 2, 3]  # results in order, a call per helper
 
 
