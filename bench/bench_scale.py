@@ -35,6 +35,7 @@ from bench.bench_weights import ICT, write_capture
 from bench.capture_like import FRAMES, capture_like
 from converter.animation import FaceAnimation, Part
 from converter.convert import convert_animation, extract_sheet, load
+from converter.encode import parallel
 from converter.formats import load as load_file
 from converter.options import ConversionOptions, Report
 from converter.outputs import output_kind
@@ -179,21 +180,26 @@ def child(frames: int, triangles: int, subdivisions: int, mode: str) -> dict:
         return out
 
     kind.shading_writers["flat"] = timed
-    c = usage.cpu()
+    c, w = usage.cpu(), time.perf_counter()
     result = convert_animation(anim, ConversionOptions(raw=mode == "raw"))
-    cpu = usage.cpu() - c
-    return {"triangles": anim.n_faces, "frames": anim.n_frames, "cpu": cpu, "writer_cpu": writer_cpu[0],
+    cpu, wall = usage.cpu() - c, time.perf_counter() - w
+    return {"triangles": anim.n_faces, "frames": anim.n_frames, "cpu": cpu, "wall": wall, "writer_cpu": writer_cpu[0],
             "extract_cpu": cpu - writer_cpu[0], "peak_mb": usage.peak_mb(),
-            "before_mb": before_mb, "bytes": len(result.data), "paths": result.report.counts.get("paths", 0)}
+            "before_mb": before_mb, "bytes": len(result.data), "md5": hashlib.md5(result.data).hexdigest(),
+            "paths": result.report.counts.get("paths", 0)}
 
 
-def measure(frames: int, triangles: int, subdivisions: int, mode: str) -> dict:
-    """child(...) in a fresh interpreter (the face is generated first, in a process of its own)."""
+def measure(frames: int, triangles: int, subdivisions: int, mode: str, threads: int | None = None) -> dict:
+    """child(...) in a fresh interpreter (the face is generated first, in a process of its own), its kernels on
+    threads threads (default: the converter's own choice)."""
     if mode != "floor" and triangles != ARKIT[1]:
         face_file(frames, triangles, subdivisions)
     cmd = [sys.executable, str(Path(__file__).resolve()), "child", str(frames), str(triangles), str(subdivisions),
            mode]
     env = dict(os.environ, PYOPENGL_PLATFORM=os.environ.get("PYOPENGL_PLATFORM", "egl"))
+    env.pop(parallel.ENV, None)
+    if threads is not None:
+        env[parallel.ENV] = str(threads)
     out, tree_mb = usage.run_measured(cmd, env=env, cwd=ROOT)
     r = json.loads(out.stdout.strip().splitlines()[-1])
     r["rss_peak_mb"], r["peak_mb"] = r["peak_mb"], max(r["peak_mb"], tree_mb)
@@ -242,6 +248,13 @@ def run() -> str:
         tf = r["triangles"] * r["frames"]
         rows.append(f"| {case[1] // 1000}k x {case[0]} | {r['cpu']:.1f} | {r['peak_mb']:,.0f} | "
                     f"{r['peak_mb'] * 2 ** 20 / tf:.0f} | {r['bytes'] / 1e6:.1f} |")
+    one = _median([measure(*CAPTURE, "bounded", threads=1) for _ in range(MEDIAN_RUNS)])
+    rows += ["", f"Threads: the capture-like face with the kernels on {parallel.THREADS} threads (the default here) "
+             f"and on one (`FACESVG_THREADS=1`), each the median run by CPU of {MEDIAN_RUNS}:", "",
+             "| threads | CPU s | wall s | peak MB | same bytes |", "|---|---|---|---|---|"]
+    for label, r in ((str(parallel.THREADS), res[CAPTURE][0]), ("1", one)):
+        rows.append(f"| {label} | {r['cpu']:.1f} | {r['wall']:.1f} | {r['peak_mb']:,.0f} | "
+                    f"{'yes' if r['md5'] == res[CAPTURE][0]['md5'] else 'NO'} |")
     fx = [res[c][0]["frames"] for c in frame_cases]
     tx = [res[c][0]["triangles"] for c in tri_cases]
     grow = (f"Growth exponents (log-log fit of convert CPU): frames {_exponent(fx, [res[c][0]['cpu'] for c in frame_cases])}"

@@ -12,6 +12,7 @@ from pathlib import Path
 from converter import formats, framing, warm
 from converter.bundled import sample_path
 from converter.convert import convert
+from converter.encode import parallel
 from converter.errors import FacesvgError, InputError
 from converter.options import ConversionOptions, Eta, OptionField, option_fields
 from converter.outputs import choices, output_kind
@@ -43,6 +44,13 @@ class ProgressBar:
         if fraction >= 1.0:
             sys.stderr.write("\n")
         sys.stderr.flush()
+
+
+def _count(text: str) -> int:
+    """argparse type: a whole number >= 1."""
+    if not text.strip().isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, not {text!r}")
+    return int(text)
 
 
 def _help(spec: OptionField) -> str:
@@ -89,6 +97,8 @@ def cmd_convert(args: argparse.Namespace) -> int:
     else:
         default_out = Path(args.input).with_suffix(suffix)
     out = check_output(args.output if args.output else default_out)
+    if args.threads is not None:
+        parallel.use_threads(args.threads)
     result = convert(args.input, options, progress=ProgressBar(not args.quiet and sys.stderr.isatty() or args.progress),
                      cache=args.cache)
     write_atomic(out, result.data)
@@ -159,6 +169,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", help="also write the Report as JSON to this file")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.add_argument("--progress", action="store_true", help="progress bar even when stderr is not a terminal")
+    p.add_argument("--threads", type=_count, metavar="N",
+                   help=f"threads for the compiled loops (default: ${parallel.ENV}, else the CPUs this process may "
+                        f"use, at most {parallel.MAX_THREADS}); 1 takes the least CPU time when conversions run side "
+                        "by side. The output is the same for any N")
     add_conversion_options(p)
     p.set_defaults(func=cmd_convert)
 

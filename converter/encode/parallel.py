@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import warnings
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, wait
 from contextlib import AbstractContextManager
@@ -12,21 +13,52 @@ from typing import TypeVar
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-THREADS = max(1, min(4, os.cpu_count() or 1))
+MAX_THREADS = 4  # the default's cap: past it the loops gain little and the per-thread buffers cost memory
+ENV = "FACESVG_THREADS"
+
+
+def default_threads() -> int:
+    """The kernels' thread count: FACESVG_THREADS when it is a whole number >= 1, else the CPUs this process may
+    run on (its affinity, which taskset and container CPU sets narrow), at most MAX_THREADS."""
+    value = os.environ.get(ENV, "").strip()
+    if value:
+        if value.isdigit() and int(value) >= 1:
+            return int(value)
+        warnings.warn(f"{ENV}={value!r} is not a whole number >= 1: ignored", stacklevel=2)
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cpus = os.cpu_count() or 1
+    return max(1, min(MAX_THREADS, cpus))
+
+
+THREADS = default_threads()
 T = TypeVar("T")
 PIECES = 4  # slices of a threaded loop per thread (the ICT head x 1,000: this thread waited 2.9 s of 70 on halves)
 
 
-_pool: tuple[int, ThreadPoolExecutor] | None = None  # (pid that made it, pool): a forked child makes its own
+def use_threads(n: int) -> None:
+    """Run the kernels on n threads from now on (the CLI's --threads)."""
+    global THREADS
+    if n < 1:
+        raise ValueError(f"threads must be >= 1, not {n}")
+    THREADS = n
+
+
+_pool: tuple[int, int, ThreadPoolExecutor] | None = None  # (pid that made it, helpers, pool): a forked child or a
+# new thread count makes its own
 
 
 def _helpers() -> ThreadPoolExecutor:
     """THREADS - 1 threads kept for the life of the process: a pool per call started ~260 threads a conversion
     of the capture-like face (0.2 s)."""
     global _pool
-    if _pool is None or _pool[0] != os.getpid():  # a pool's threads do not survive fork
-        _pool = (os.getpid(), ThreadPoolExecutor(THREADS - 1, thread_name_prefix="facesvg-kernel"))
-    return _pool[1]
+    helpers = max(1, THREADS - 1)
+    if _pool is None or _pool[:2] != (os.getpid(), helpers):  # a pool's threads do not survive fork
+        if _pool is not None and _pool[0] == os.getpid():
+            _pool[2].shutdown(wait=False)
+        _pool = (os.getpid(), helpers, ThreadPoolExecutor(helpers, thread_name_prefix="facesvg-kernel"))
+    return _pool[2]
 
 
 def slices(n: int, per_thread: int = 1) -> list[tuple[int, int]]:

@@ -24,6 +24,16 @@ def test_convert_sample_writes_svg_and_summary(sample_path, tmp_path):
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no temp file left
 
 
+@pytest.mark.slow
+def test_the_output_is_the_same_on_any_number_of_threads(sample_path, tmp_path):
+    outs = []
+    for threads in ("1", "3"):
+        outs.append(tmp_path / f"face{threads}.svg")
+        r = run("convert", sample_path, "-o", outs[-1], "--size", "256", "--end", "40", "--threads", threads)
+        assert r.returncode == 0, r.stderr
+    assert outs[0].read_bytes() == outs[1].read_bytes()
+
+
 def test_info_describes_sample(sample_path):
     r = run("info", sample_path, "--json")
     assert r.returncode == 0, r.stderr
@@ -73,6 +83,8 @@ def test_failed_conversion_leaves_existing_output_untouched(tmp_path):
         (["--start", "5", "--end", "2"], "range"),
         (["--shading", "toon"], "shading"),
         (["-o", "/nonexistent-folder/x.svg"], "folder"),
+        (["--threads", "0"], "threads"),
+        (["--threads", "two"], "threads"),
     ],
 )
 def test_bad_options_are_clear_errors(sample_path, args, needle):

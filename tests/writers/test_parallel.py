@@ -106,3 +106,38 @@ def test_a_forked_child_makes_helpers_of_its_own(two):
     finally:
         os.close(r)
         os.waitpid(pid, 0)
+
+
+def test_the_thread_count_comes_from_the_environment_else_the_cpus_this_process_may_use(monkeypatch):
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(16)), raising=False)
+    monkeypatch.setenv(parallel.ENV, "3")
+    assert parallel.default_threads() == 3
+    monkeypatch.delenv(parallel.ENV)
+    assert parallel.default_threads() == parallel.MAX_THREADS
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {5}, raising=False)  # taskset -c 5
+    assert parallel.default_threads() == 1
+    for bad in ("0", "two", "-1"):
+        monkeypatch.setenv(parallel.ENV, bad)
+        with pytest.warns(UserWarning, match=parallel.ENV):
+            assert parallel.default_threads() == 1
+
+
+def test_use_threads_runs_the_next_loop_on_that_many_threads(monkeypatch):
+    monkeypatch.setattr(parallel, "THREADS", parallel.THREADS)  # restored after the test
+    seen = set()
+    lock = threading.Lock()
+
+    def kernel(first, stop):
+        time.sleep(0.02)  # holds its thread: every thread gets a slice
+        with lock:
+            seen.add(threading.get_ident())
+
+    parallel.use_threads(3)
+    parallel.threaded(kernel, 60)
+    assert len(seen) == 3
+    seen.clear()
+    parallel.use_threads(1)
+    parallel.threaded(kernel, 60)
+    assert seen == {threading.get_ident()}
+    with pytest.raises(ValueError):
+        parallel.use_threads(0)
