@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import subprocess
 import sys
 from pathlib import Path
 
@@ -132,3 +133,14 @@ if __name__ == "__main__":  # pragma: no cover - a quick report for developers
     names, edges = import_graph()
     print("\n".join(" <-> ".join(c) for c in cycles(names, edges)) or "no cycles")
     pytest.main([__file__, "-q"])
+
+
+def test_the_command_loads_the_web_app_only_to_serve():
+    code = ("import sys, converter.cli; p = converter.cli.build_parser(); "
+            "print(sorted(m for m in ('flask', 'webapp.app', 'webapp.runner', 'waitress') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"  # `facesvg convert` builds the whole parser, serve and worker included
+    code = "import webapp; print(webapp.create_app.__module__, callable(webapp.create_app))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert out.stdout.split() == ["webapp.app", "True"], out.stderr  # gunicorn 'webapp:create_app()' still finds it
