@@ -126,16 +126,22 @@ def test_use_threads_runs_the_next_loop_on_that_many_threads(monkeypatch):
     monkeypatch.setattr(parallel, "THREADS", parallel.THREADS)  # restored after the test
     seen = set()
     lock = threading.Lock()
+    all_three = threading.Barrier(3, timeout=30)  # broken (the loop raises) unless three threads take slices
 
     def kernel(first, stop):
-        time.sleep(0.02)  # holds its thread: every thread gets a slice
         with lock:
+            new = threading.get_ident() not in seen
             seen.add(threading.get_ident())
+        if new and all_three is not None:
+            all_three.wait()
 
+    parallel.use_threads(2)
+    parallel.threaded(_fill, 10, np.zeros(10), np.zeros(10, np.int64))  # a pool of one helper, kept
     parallel.use_threads(3)
     parallel.threaded(kernel, 60)
     assert len(seen) == 3
     seen.clear()
+    all_three = None
     parallel.use_threads(1)
     parallel.threaded(kernel, 60)
     assert seen == {threading.get_ident()}
