@@ -46,11 +46,12 @@ class ProgressBar:
         sys.stderr.flush()
 
 
-def _count(text: str) -> int:
-    """argparse type: a whole number >= 1."""
-    if not text.strip().isdigit() or int(text) < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, not {text!r}")
-    return int(text)
+def _threads(text: str) -> int:
+    """argparse type of --threads: parallel.thread_count, its error as argparse's message."""
+    try:
+        return parallel.thread_count(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _help(spec: OptionField) -> str:
@@ -169,7 +170,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", help="also write the Report as JSON to this file")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.add_argument("--progress", action="store_true", help="progress bar even when stderr is not a terminal")
-    p.add_argument("--threads", type=_count, metavar="N",
+    p.add_argument("--threads", type=_threads, metavar="N",
                    help=f"threads for the compiled loops (default: ${parallel.ENV}, else the CPUs this process may "
                         f"use, at most {parallel.MAX_THREADS}); 1 takes the least CPU time when conversions run side "
                         "by side. The output is the same for any N")

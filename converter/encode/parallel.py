@@ -17,14 +17,22 @@ MAX_THREADS = 4  # the default's cap: past it the loops gain little and the per-
 ENV = "FACESVG_THREADS"
 
 
+def thread_count(text: str) -> int:
+    """A thread count written as text: a whole number >= 1, else ValueError."""
+    if not text.strip().isdigit() or int(text) < 1:
+        raise ValueError(f"expected a whole number >= 1, not {text!r}")
+    return int(text)
+
+
 def default_threads() -> int:
-    """The kernels' thread count: FACESVG_THREADS when it is a whole number >= 1, else the CPUs this process may
-    run on (its affinity, which taskset and container CPU sets narrow), at most MAX_THREADS."""
+    """The kernels' thread count: FACESVG_THREADS when it is a thread_count, else the CPUs this process may run
+    on (its affinity, which taskset and container CPU sets narrow), at most MAX_THREADS."""
     value = os.environ.get(ENV, "").strip()
     if value:
-        if value.isdigit() and int(value) >= 1:
-            return int(value)
-        warnings.warn(f"{ENV}={value!r} is not a whole number >= 1: ignored", stacklevel=2)
+        try:
+            return thread_count(value)
+        except ValueError as exc:
+            warnings.warn(f"{ENV}: {exc}: ignored", stacklevel=2)
     try:
         cpus = len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
