@@ -246,31 +246,36 @@ def motion_clusters(band: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutral
     center = ref.mean(axis=0)
     fit = fit_affine(ref - center, xy, verts)
     rel, t = ref - center, len(xy)
-    # Per vertex its residual trajectory (n, T, 2), written a block of frames at a time straight into the
-    # features' layout. A (T, n, 2) array of residuals, then its transposed copy for the features, was the peak of
-    # a long capture (ICT head x 4,000: 7.98 GB, now 7.48 at another stage)
-    res = np.empty((len(verts), t, 2))
-    total = np.zeros((len(verts), 2))  # their sum over frames, added frame by frame as res.sum(axis=0) adds them
     # buffers for a block of frames, reused: fresh pages cost system time to fault in
-    taken, fitted = (np.empty((min(t, FRAME_BLOCK), len(verts), 2)) for _ in range(2))
-    for sl in blocks(t, FRAME_BLOCK):
-        part = np.take(xy[sl], verts, axis=1, out=taken[:sl.stop - sl.start])
-        model = apply_linear(fit[sl, :, :2], rel, out=fitted[:sl.stop - sl.start])
-        model += fit[sl, None, :, 2]
-        part -= model
-        res[:, sl] = part.transpose(1, 0, 2)
+    bufs = [np.empty((min(t, FRAME_BLOCK), len(verts), 2)) for _ in range(2)]
+
+    def residuals():  # per block of frames, the vertices' residuals (a view of a buffer: used before the next)
+        for sl in blocks(t, FRAME_BLOCK):
+            part = np.take(xy[sl], verts, axis=1, out=bufs[0][:sl.stop - sl.start])
+            model = apply_linear(fit[sl, :, :2], rel, out=bufs[1][:sl.stop - sl.start])
+            model += fit[sl, None, :, 2]
+            part -= model
+            yield sl, part
+
+    # Worked out a block of frames at a time, three times over (their mean, their spread about it, then the
+    # features), rather than held: the residuals (T, n, 2), their lengths and then a transposed copy for the
+    # features were the peak of a long capture (ICT head x 4,000: 7.98 GB).
+    total = np.zeros((len(verts), 2))  # the residuals' sum over frames, added frame by frame as .sum(axis=0) adds
+    for _, part in residuals():
         for f in range(len(part)):  # (no loop name left holding a view of the buffer)
             total += part[f]
-        del part, model  # views of the buffers: they would keep them alive
-    del taken, fitted
     mean = total / max(t, 1)
-    spread = np.empty(res.shape[:2])
-    for sl in blocks(t, FRAME_BLOCK):  # a block of frames at a time: no temporary of res's size
-        spread[:, sl] = lengths(res[:, sl] - mean[:, None])
+    spread = np.empty((len(verts), t))
+    for sl, part in residuals():
+        spread[:, sl] = lengths(part - mean).T
     del mean
     if np.percentile(spread, 95, overwrite_input=True) <= MERGE_PX:  # (partitioned in place, not in a copy)
         return out  # the head moves rigidly: one band explains it
     del spread
+    res = np.empty((len(verts), t, 2))  # per vertex its residual trajectory: the features' layout
+    for sl, part in residuals():
+        res[:, sl] = part.transpose(1, 0, 2)
+    part = bufs = None  # the block buffers go (part is a view of one)
     feat = res.reshape(len(verts), -1)  # vertex v's frame k coordinate c at column 2k + c
     del res
     feat -= feat.mean(axis=0)
@@ -538,14 +543,18 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
 
     size = freeknots.block_tracks(t)
 
-    def head_keys_of(paths: np.ndarray, limit: np.ndarray | None = None) -> tuple[keyframes.Packed, np.ndarray]:
-        # head-local, a block of paths at a time (the dense keys stay small)
+    def packed_keys(tracks_of, r, paths: np.ndarray,
+                    limit: np.ndarray | None = None) -> tuple[keyframes.Packed, np.ndarray]:
+        # a block of paths at a time: their tracks (float64 when band-local) and dense keys stay small. A long run
+        # is a block of runs of its own: at once, its band-local tracks and keys took 2 GB of the ICT head x 4,000.
         parts, gave_up = [], np.zeros(len(paths), bool)
         for sl in blocks(len(paths), size):
-            k, gave_up[sl] = keys_of(lay.head_local.take(paths[sl]), r_head, paths[sl],
-                                     None if limit is None else limit[sl])
+            k, gave_up[sl] = keys_of(tracks_of(paths[sl]), r, paths[sl], None if limit is None else limit[sl])
             parts.append(keyframes.pack(k))
         return keyframes.join(parts), gave_up
+
+    def head_keys_of(paths: np.ndarray, limit: np.ndarray | None = None) -> tuple[keyframes.Packed, np.ndarray]:
+        return packed_keys(lay.head_local.take, r_head, paths, limit)
 
     group_bytes = [costs.transform(m) for m in lay.motions]
     runs = list(zip(lay.runs[:-1].tolist(), lay.runs[1:].tolist()))
@@ -574,7 +583,7 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
         kl = None
         if cand:
             sel = np.concatenate([np.arange(a, b) for a, b in cand])
-            kl = keyframes.pack(keys_of(lay.band_local(sel), r_local, sel)[0])
+            kl = packed_keys(lay.band_local, r_local, sel)[0]
             kl_n[sel] = np.diff(kl.start)
             for a, b in cand:
                 share = int((group_bytes[int(lay.band[a])] + costs.close) / costs.key // (b - a)) + 1
@@ -655,11 +664,15 @@ def _plain_keys(xy: np.ndarray, faces: np.ndarray, tris: np.ndarray, active: np.
     steps = [s for s in (PLAIN_SAMPLE ** 2, PLAIN_SAMPLE) if p >= 50 * s] or [1]  # >= 50 paths in a sample
     keys_n = 0
     screen = Tracks.screen(xy, faces[tris])
+    size = freeknots.block_tracks(active.shape[0])
     for i, step in enumerate(steps):
         sample = np.arange(0, p, step)
-        plain = freeknots.point_keys(screen.take(sample), np.take(active, sample, axis=1),
-                                     np.full(len(sample), max(radius, 1e-6)), freeknots.SHAPES_DEG[:1])
-        keys_n = int(round(plain.mask.sum() * p / len(sample)))
+        found = 0
+        for sl in blocks(len(sample), size):  # a block of paths at a time: only their count is kept
+            plain = freeknots.point_keys(screen.take(sample[sl]), np.take(active, sample[sl], axis=1),
+                                         np.full(len(sample[sl]), max(radius, 1e-6)), freeknots.SHAPES_DEG[:1])
+            found += int(plain.mask.sum())
+        keys_n = int(round(found * p / len(sample)))
         if i == len(steps) - 1 or abs(keys_n - grouped_keys) > PLAIN_MARGIN * grouped_keys:
             break
     return keys_n

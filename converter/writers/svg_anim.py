@@ -40,7 +40,7 @@ from converter.encode import keys as keyframes
 from converter.encode import steps as held
 from converter.encode.budget import ErrorBudget, viewbox_scale
 from converter.encode.order import draw_list
-from converter.encode.tracks import Tracks
+from converter.encode.tracks import Tracks, blocks
 from converter.errors import InputError
 from converter.options import ConversionOptions, Progress, Report, no_progress, span
 from converter.sheet import Sheet
@@ -55,6 +55,7 @@ STROKE_PX = 0.5  # stroke of the fill colour hides anti-aliasing seams between n
 COLOR_TIME_LEVELS = 0.1  # of which rounding the colour keyTimes may take
 BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime): what groups weigh
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
+UNIFORM_VALUES = 1 << 23  # float64 track values fitted at once (64 MB: 4,000 frames x 349 paths)
 KEY_TEXT_KEYS = 1 << 15  # keys whose d and keyTimes texts exist at once (a block of paths)
 RAW_COUNT_CELLS = 1 << 17  # vertex-frames per block when counting the raw encoding's bytes (~10 MB of temporaries)
 RAW_WRITE_PATHS = 128  # paths per block when writing it (its one format call holds 18 objects per tri-frame)
@@ -591,12 +592,16 @@ def _uniform_instead(attribute: str, track: Tracks, active: np.ndarray, counts: 
         head = len(f'<animate attributeName="{attribute}" dur="{dur}" repeatCount="indefinite" values=""/>')
         worth = head + cand * (value_len[todo] + 1) - 1 < keyed_len[todo]
         for n in np.unique(cand[worth]).tolist():
-            idx = todo[worth & (cand == n)]
-            q, ok = keyframes.uniform_fit(np.asarray(track.take(idx), np.float64),
-                                          np.take(active, idx, axis=1), n, scale,
-                                          radius if np.isscalar(radius) else radius[idx], pairs)
-            for j, col in zip(idx[ok].tolist(), np.flatnonzero(ok).tolist()):
-                values[j] = q[:, col]
+            # a block of paths at a time (each is fitted on its own): at once, the paths of one key count took
+            # 2 GB of float64 tracks on the ICT head x 4,000
+            every = todo[worth & (cand == n)]
+            for sl in blocks(len(every), max(1, UNIFORM_VALUES // max(t * track.shape[2], 1))):
+                idx = every[sl]
+                q, ok = keyframes.uniform_fit(np.asarray(track.take(idx), np.float64),
+                                              np.take(active, idx, axis=1), n, scale,
+                                              radius if np.isscalar(radius) else radius[idx], pairs)
+                for j, col in zip(idx[ok].tolist(), np.flatnonzero(ok).tolist()):
+                    values[j] = q[:, col]
         todo = np.setdiff1d(todo, np.fromiter(values, np.int64, len(values)))
     for j in sorted(values):
         anims[j] = (f'<animate attributeName="{attribute}" dur="{dur}" repeatCount="indefinite" '

@@ -296,6 +296,22 @@ def test_key_texts_written_a_block_of_paths_at_a_time_are_the_same_file(monkeypa
         assert blocks.data == one.data and one.report.counts["keys"] > 5  # more than one block
 
 
+def test_uniform_keys_fitted_a_block_of_paths_at_a_time_are_the_same_file(monkeypatch):
+    # Evenly spaced keys are fitted for the paths of one key count together, in blocks of UNIFORM_VALUES track
+    # values: a block of two paths writes the same file as all of them at once, and no fit sees more.
+    anim = half_moving()
+    fitted: list[int] = []
+    fit = svg_anim.keyframes.uniform_fit
+    monkeypatch.setattr(svg_anim.keyframes, "uniform_fit", lambda x, *a: fitted.append(x.shape[1]) or fit(x, *a))
+    opts = ConversionOptions(size=96, occlusion=False)
+    one = convert_animation(anim, opts)
+    assert max(fitted) > 2
+    fitted.clear()
+    monkeypatch.setattr(svg_anim, "UNIFORM_VALUES", anim.n_frames * 6 * 2)
+    assert convert_animation(anim, opts).data == one.data
+    assert max(fitted) == 2
+
+
 def test_still_frame_is_static_and_exact_to_grid():
     anim = half_moving()
     data = convert_animation(anim, ConversionOptions(size=96, frame=7, occlusion=False)).data
