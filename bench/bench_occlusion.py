@@ -77,7 +77,7 @@ def fine_sets(anim: FaceAnimation, cam: Camera, vis: np.ndarray, s: int = 5) -> 
     faces, every = np.ascontiguousarray(anim.faces, np.int64), np.ones(f, bool)  # every face, as GL drew them
     for k in range(anim.n_frames):
         raster.window_positions(anim.frames[k], m, fine.width, fine.height, fixed, xy, z)
-        raster.draw_ids(fixed, xy, z, faces, every, ids, depth)
+        raster.draw_ids(fixed, xy, z, faces, every, ids, depth, raster.ALL_TILES, raster.WHOLE)
         seen |= (np.bincount(ids.ravel(), minlength=f + 1)[1:] > 0) & vis[k]
         centre |= (np.bincount(ids[s // 2::s, s // 2::s].ravel(), minlength=f + 1)[1:] > 0) & vis[k]
     return seen, centre

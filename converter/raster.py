@@ -24,6 +24,9 @@ SUBPIXEL = 256  # sub-pixel grid of the snapped positions (8 bits, as llvmpipe's
 LIMIT = float(1 << 21)  # px: beyond this a corner's snapped products could overflow int64; such triangles (a
 # corner almost in the eye plane) are rasterised in float64 instead
 FAR = np.int64(-(1 << 62))  # window_positions' mark of a corner beyond LIMIT (or not finite)
+WHOLE = 1 << 30  # px: a tile side past any frame's size, so that ALL_TILES (one tile, marked) is the whole frame
+ALL_TILES = np.ones((1, 1), np.bool_)  # (writable, so that it shares the id pass's compiled signature: not to be
+# written)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -44,12 +47,27 @@ def _bias(dx, dy) -> int:
     return 0 if dy > 0 or (dy == 0 and dx > 0) else 1
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _meets(tiles, tile, c_lo, c_hi, r_lo, r_hi) -> bool:
+    """Whether the pixels c_lo..c_hi x r_lo..r_hi (within the frame) meet a marked tile of tiles (tile px a side)."""
+    for tr in range(r_lo // tile, r_hi // tile + 1):
+        for tc in range(c_lo // tile, c_hi // tile + 1):
+            if tiles[tr, tc]:
+                return True
+    return False
+
+
 @numba.njit(cache=True, nogil=True)
-def draw_ids(fixed, xy, z, faces, drawn, ids, depth) -> None:
+def draw_ids(fixed, xy, z, faces, drawn, ids, depth, tiles, tile) -> None:
     """Rasterise faces f with drawn[f] (in face order: on equal depth the first drawn stays) into ids (H, W;
     f + 1, 0 background, row 0 at the top) and depth (H, W; NDC), both cleared here. fixed (V, 2) int64 is the
     corners snapped to 1/SUBPIXEL px with y down (window_positions), xy (V, 2) float64 the same unsnapped, z (V,)
-    NDC depth; a face is front-facing when counter-clockwise in GL, clockwise here."""
+    NDC depth; a face is front-facing when counter-clockwise in GL, clockwise here.
+
+    Only the tiles asked for are drawn right: tiles (H / tile, W / tile rounded up) bool marks the square tiles of
+    tile px whose pixels are wanted, and a face none of whose pixel centres' box meets such a tile is skipped (every
+    face covering a pixel of a marked tile is drawn, in order, so those pixels are what the whole draw gives them;
+    the others are left as they come). ALL_TILES with a tile of WHOLE asks for every pixel."""
     h, w = ids.shape
     ids[:] = 0
     depth[:] = 1.0
@@ -71,6 +89,8 @@ def draw_ids(fixed, xy, z, faces, drawn, ids, depth) -> None:
         r_hi = min(h - 1, (max(y0, y1, y2) - half) // s)
         if c_lo > c_hi or r_lo > r_hi:
             continue  # no pixel centre in its box (most sub-pixel triangles)
+        if not _meets(tiles, tile, c_lo, c_hi, r_lo, r_hi):
+            continue
         if (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0) >= 0:
             continue  # back-facing or degenerate once snapped, as GL culls it
         gx, gy = depth_slope(xy, z, i0, i1, i2)

@@ -311,3 +311,62 @@ def test_compiled_sub_pixel_rule_keeps_what_numpy_kept_on_the_sample():
     visible = cull(xy, z, w, anim.faces, cam.width, cam.height)
     got = idpass.ever_seen(anim.frames, anim.faces, cam, visible)
     assert np.array_equal(got, _reference_ever_seen(anim.frames, anim.faces, cam, visible))
+
+
+# --- a frame is drawn only in the tiles around the triangles it may still add ------------------------------------
+def test_candidate_tiles_are_those_near_the_visible_triangles_not_yet_kept():
+    faces = np.array([[0, 1, 2], [3, 4, 5], [6, 7, 8]], np.int64)
+    xy = np.array([[20.5, 3.0], [22.0, 3.5], [21.0, 5.0],  # pixels 20..22 x 3..5: with the margin 18..24 x 1..7
+                   [40.0, 40.0], [41.0, 40.0], [40.0, 41.0],  # kept already
+                   [60.0, 60.0], [61.0, 60.0], [60.0, 61.0]])  # not drawn in this frame
+    fixed = np.rint(xy * 256).astype(np.int64)
+    visible, kept = np.array([True, True, False]), np.array([False, True, False])
+    tiles = np.zeros((8, 8), bool)  # 8 px tiles of a 64 px frame
+    assert idpass.candidate_tiles(xy, fixed, faces, visible, kept, tiles, 8)
+    want = np.zeros((8, 8), bool)
+    want[0, 2:4] = True  # rows 1..7 are tile row 0; columns 18..24 are tile columns 2 and 3
+    assert np.array_equal(tiles, want)
+
+    kept[0] = True  # nothing left to find: no tile, and the frame is not drawn
+    assert not idpass.candidate_tiles(xy, fixed, faces, visible, kept, tiles, 8) and not tiles.any()
+
+    kept[0] = False  # a corner off the frame is clamped into it, as rule 2 clamps a probe's pixel
+    xy[:3] += [-30.0, 70.0]
+    fixed = np.rint(xy * 256).astype(np.int64)
+    assert idpass.candidate_tiles(xy, fixed, faces, visible, kept, tiles, 8)
+    assert np.flatnonzero(tiles.ravel()).tolist() == [56]  # the bottom-left tile only
+
+    xy[1, 0] = np.nan  # a corner not finite: every tile
+    assert idpass.candidate_tiles(xy, fixed, faces, visible, kept, tiles, 8) and tiles.all()
+
+
+@pytest.mark.parametrize("tile", [1, 4, 16])
+def test_drawing_only_the_candidates_tiles_keeps_what_whole_frames_keep(monkeypatch, tile):
+    # The soup of tiny triangles over a big one, and the sample, over several frames: as triangles get kept, each
+    # frame is drawn in fewer tiles, and the kept set must be that of drawing every frame whole (one tile).
+    rng = np.random.default_rng(11)
+    n = 600
+    corners = rng.uniform(4, 60, (n, 1, 2)) + rng.uniform(0.05, 3.0, (n, 1, 1)) * rng.normal(0, 1, (n, 3, 2))
+    depth = rng.uniform(-0.05, 0.05, (n, 1, 1)).repeat(3, 1)
+    soup = np.concatenate([corners, depth], axis=2)[None] + np.linspace(0, 4, 10)[:, None, None, None] * [0.3, 0.2, 0]
+    world = np.stack([soup[..., 0] / SIZE * 2 - 1, 1 - soup[..., 1] / SIZE * 2, soup[..., 2]], axis=-1)
+    world = np.concatenate([np.array(BIG, np.float64)[None, None].repeat(10, 0), world], axis=1)
+    verts = world.reshape(10, -1, 3).astype(np.float32)
+    faces = np.arange(verts.shape[1], dtype=np.int32).reshape(-1, 3)
+    cam = _camera()
+    xy, z, w = cam.project(verts)
+    cases = [(verts, faces, cam, cull(xy, z, w, faces, SIZE, SIZE))]
+    from converter.extract import fit_camera
+    from converter.formats import load
+    anim = load(SAMPLE).sliced(0, 30)
+    cam = fit_camera(anim, 128)
+    xy, z, w = cam.project(anim.frames)
+    cases.append((anim.frames, anim.faces, cam, cull(xy, z, w, anim.faces, cam.width, cam.height)))
+    from converter import raster
+    for frames, faces, cam, visible in cases:
+        monkeypatch.setattr(idpass, "TILE", raster.WHOLE)
+        whole = idpass.ever_seen(frames, faces, cam, visible)
+        monkeypatch.setattr(idpass, "TILE", tile)
+        tiled = idpass.ever_seen(frames, faces, cam, visible)
+        assert np.array_equal(tiled, whole)
+        assert 0 < whole.sum() < visible.any(axis=0).sum()  # some front-facing triangles stay hidden throughout

@@ -25,7 +25,7 @@ def _ours(cam: Camera, verts: np.ndarray, faces: np.ndarray, drawn: np.ndarray |
     fixed, xy, z = np.empty((v, 2), np.int64), np.empty((v, 2)), np.empty(v)
     raster.window_positions(np.asarray(verts), cam.projection @ cam.view, cam.width, cam.height, fixed, xy, z)
     ids, depth = np.empty((cam.height, cam.width), np.uint32), np.empty((cam.height, cam.width))
-    raster.draw_ids(fixed, xy, z, np.asarray(faces, np.int64), drawn, ids, depth)
+    raster.draw_ids(fixed, xy, z, np.asarray(faces, np.int64), drawn, ids, depth, raster.ALL_TILES, raster.WHOLE)
     return ids
 
 
