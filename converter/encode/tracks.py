@@ -42,6 +42,15 @@ class Tracks(NamedTuple):
         return Tracks(self.verts, self.corners[order])
 
 
+def first_use(ids: np.ndarray, n: int) -> np.ndarray:
+    """The distinct values of ids (integers in 0..n-1, read flattened) in the order they first occur."""
+    flat = np.asarray(ids, np.int64).ravel()
+    first = np.full(n, len(flat), np.int64)
+    np.minimum.at(first, flat, np.arange(len(flat)))
+    used = np.flatnonzero(first < len(flat))
+    return used[np.argsort(first[used], kind="stable")]
+
+
 def blocks(n: int, size: int) -> list[slice]:
     """Consecutive slices of at most size (>= 1) covering 0..n."""
     size = max(1, size)

@@ -390,6 +390,29 @@ def test_plan_timeline_holds_its_tracks_within_radius(sheet):
     assert worst > 0.5 and over <= 1e-4  # float32 key values: the budget's float_err (1e-3 px here) covers them
 
 
+def test_head_local_rows_are_the_paths_vertices_in_the_order_they_first_use_them(sheet):
+    """The layout keeps head-local px for the paths' own vertices only, numbered along the paths' order: each path's
+    track is, bit for bit, its corners' head-frame px (float64, cast to float32) as worked out for every vertex."""
+    tris = sheet.order[::2]  # half the paths: some vertices belong to none of them
+    act = sheet.visible[:, tris]
+    budget = ErrorBudget(0.25, 6, math.sqrt(0.5) / 6, 0.0075, 1e-3, 0.1)
+    lay = groups.layout(sheet.xy, sheet.faces, sheet.part_ids, 0, tris, act, budget)
+    head = lay.head
+    inv = np.linalg.inv(head.matrices[:, :, :2])
+    in_head = sheet.xy.astype(np.float64) - head.matrices[:, None, :, 2]
+    for sl in groups.blocks(len(in_head), groups.FRAME_BLOCK):  # as layout works them (one matrix product a block)
+        in_head[sl] = groups.apply_linear(inv[sl], in_head[sl], out=np.empty_like(in_head[sl]))
+    corners = sheet.faces[tris[lay.order]]
+    t, p = act.shape
+    want = np.take(in_head, corners, axis=1).astype(np.float32).reshape(t, p, 6)
+    assert np.array_equal(lay.head_local.take(slice(None)), want)
+    rows = lay.head_local.corners.ravel()
+    used = len(np.unique(corners))
+    assert lay.head_local.verts.shape[1] == used < sheet.xy.shape[1]
+    firsts = rows[np.sort(np.unique(rows, return_index=True)[1])]
+    assert firsts.tolist() == list(range(used))  # row r is the r-th vertex the paths meet
+
+
 @pytest.mark.parametrize("stop", [(0.0, 0.0), (groups.STOP_SLACK, groups.STOP_SHARE)])
 def test_head_local_keys_stopped_early_make_the_plan_in_full(sheet, monkeypatch, stop):
     """Head-local keys stop early on runs that may pay (lower bounds decide them; the others' stopped paths are

@@ -8,7 +8,7 @@ import pytest
 from converter.encode import collapse, freeknots
 from converter.encode import keys as keyframes
 from converter.encode.groups import local_tracks
-from converter.encode.tracks import Tracks, blocks
+from converter.encode.tracks import Tracks, blocks, first_use
 
 
 def _face(seed: int, t: int = 30, v: int = 40, p: int = 60):
@@ -93,3 +93,14 @@ def test_take_paths_reorders_a_timeline():
     direct = collapse.fold(keyframes.Keys(keys.mask[:, order], keys.values[:, order], keys.first_active[order]),
                            active[:, order])
     assert all(np.array_equal(x, y) for x, y in zip(moved, direct))
+
+
+def test_first_use_lists_each_value_once_where_it_first_occurs():
+    ids = np.array([[7, 2, 7], [3, 2, 9], [0, 9, 3]])
+    assert first_use(ids, 12).tolist() == [7, 2, 3, 9, 0]
+    rng = np.random.default_rng(2)
+    ids = rng.integers(0, 500, (300, 3))
+    got = first_use(ids, 500)
+    flat = ids.ravel().tolist()
+    assert got.tolist() == sorted(set(flat), key=flat.index)
+    assert first_use(np.zeros((0, 3), np.int64), 5).tolist() == []
