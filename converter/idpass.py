@@ -4,11 +4,11 @@ Each frame's ids are rasterised on the CPU by converter.raster, GL's rules witho
 with Mesa's llvmpipe on every pixel of the bench faces but depth ties below float32 rounding, and keeps the same
 triangles; the tests check it against that GL render), into an id and a depth buffer reused for every frame; a
 compiled loop marks the ids' faces. A frame is drawn and read only in the tiles around the triangles it may
-still add (those it draws that no earlier frame kept): 0.69 -> 0.44 s of CPU over the capture-like face's 335
-frames, 1.70 -> 1.34 s over 300 frames of the ICT head, where rule 2's probes of ~6k hidden sub-pixel triangles
-a frame are most of what is left. Frames are split between parallel.THREADS slots. GL (llvmpipe) drew the
-ids until 2026-12: its per-triangle setup made the draw of a frame of the 128k-triangle bench face cost ~39 ms
-of CPU; here the whole frame, rule 2 included, costs ~12 ms.
+still add (those it draws that no earlier frame kept): on one thread, 0.69 -> 0.44 s of CPU over the
+capture-like face's 335 frames, 1.70 -> 1.34 s over 300 frames of the ICT head, where rule 2's probes of ~6k
+hidden sub-pixel triangles a frame are most of what is left. Frames are split between parallel.THREADS slots.
+GL (llvmpipe) drew the ids until 2026-12: its per-triangle setup made the draw of a frame of the 128k-triangle
+bench face cost ~39 ms of CPU; here the whole frame, rule 2 included, costs ~12 ms.
 
 A frame draws only the triangles the SVG draws in it (front-facing, in the view: converter.extract.cull), as
 the writers hide the others there: a triangle culled in a frame hides nothing in it (one with a corner behind
