@@ -146,9 +146,10 @@ def run() -> str:
         "still add (drawn there, kept by no earlier frame), a tenth of the screen after the first frames; the same "
         "kept sets. Same-hour A/B on this face, old and new code alternating (medians of 4, a script not in the repo; the "
         "machine drifted by a third within minutes): one thread 0.65 -> 0.44 and 0.87 -> 0.65 s, two threads "
-        "0.65 -> 0.64 and 0.82 -> 0.68 s (on two the tiles save less: each thread's frames start from its own empty "
-        "kept set, and the threads' overhead stays). Until then this table timed each new run right after an old one, whose "
-        "llvmpipe threads ran on into it: every new run now comes first.",
+        "0.65 -> 0.64 and 0.82 -> 0.68 s (on two the tiles save less; one kept set shared by the threads, tried, "
+        "did not change that; this VM charges two threads 15-30 % more CPU than one for the same work). Until then "
+        "this table timed each new run right after an old one, whose llvmpipe threads ran on into it: every new run "
+        "now comes first.",
         "",
         "Kept sets against a 5x finer id render ('visible' = owns one of its samples in some frame; 'centre "
         "owner' = owns one of its samples at our pixel centres). old-new / new-old: triangles only one pass "
