@@ -2,16 +2,19 @@
 
 import json
 import re
+import weakref
 
 import numpy as np
 import pytest
 
+from converter import convert as convert_module
 from converter import formats, render
 from converter.animation import vertex_normals
 from converter.camera import Camera
 from converter.convert import convert, extract_sheet
 from converter.lighting import lambert
 from converter.options import ConversionOptions, Report
+from converter.outputs import output_kind
 from svgrender import chromium_frame, iou
 
 
@@ -122,3 +125,31 @@ def test_lighting_some_rows_gives_their_bits_among_all():
     for rows in (np.arange(0, 1001, 3), np.array([1000, 7, 7, 0]), np.arange(1001)):
         got = lambert_linear(normals, rgb[:, rows], view, rows=rows)
         assert got.shape == (5, len(rows), 3) and np.array_equal(got, every[:, rows])
+
+
+@pytest.mark.parametrize("end", [None, 8])  # the whole animation, and a frame range (prepare makes a new one)
+def test_convert_lets_the_3d_frames_go_before_the_writer_runs(sample_path, monkeypatch, end):
+    loaded, cut, alive = [], [], []
+    real_load, real_cut, kind = convert_module.load, convert_module.prepare, output_kind("svg")
+    real_write = kind.shading_writers["flat"]
+
+    def load(*args, **kwargs):
+        anim = real_load(*args, **kwargs)
+        loaded.append(weakref.ref(anim.frames))
+        return anim
+
+    def prepare(anim, *args, **kwargs):
+        out = real_cut(anim, *args, **kwargs)
+        cut.append(weakref.ref(out.frames))
+        return out
+
+    def write(*args, **kwargs):
+        alive.extend(ref() is not None for ref in loaded + cut)  # no gc.collect: freed by reference counting
+        return real_write(*args, **kwargs)
+
+    monkeypatch.setattr(convert_module, "load", load)
+    monkeypatch.setattr(convert_module, "prepare", prepare)
+    monkeypatch.setitem(kind.shading_writers, "flat", write)
+    result = convert(sample_path, ConversionOptions(end=end))
+    assert b"<svg" in result.data[:500]
+    assert len(alive) == 2 and not any(alive)
