@@ -23,6 +23,7 @@ import gzip
 import json
 import math
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,6 +41,9 @@ from converter.options import ConversionOptions, Report
 from converter.writers import player
 
 SVG_NS = "{http://www.w3.org/2000/svg}"
+NO_PATHS = "the SVG has no triangle paths (id f<number>); only facesvg output can be verified."
+BLOCK_BYTES = 1 << 25  # paths measured at once: about this many bytes of their (T, n, 3, 2) float64 positions
+FRAME_BLOCK = 256  # frames projected at once
 _TOKEN = re.compile(r"[MmLlZzHhVv]|[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 _NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
@@ -340,17 +344,33 @@ def evaluate(data: bytes) -> Evaluated:
         return Evaluated(d.meta, d.triangles, d.path_xy(), d.shown)
     root = read_svg(data)
     meta = metadata_of(root)
+    parts = list(_svg_paths(root, meta, _svg_times(meta)))
+    if not parts:
+        raise InputError(NO_PATHS)
+    tris, xys, shown, points = zip(*parts)
+    return Evaluated(meta, np.concatenate(tris), np.concatenate(xys, axis=1), np.concatenate(shown, axis=1),
+                     np.concatenate(points, axis=1))
+
+
+def _svg_times(meta: dict) -> np.ndarray:
+    """The frame times k / fps (s) of a facesvg SVG's metadata."""
     try:
         n_frames, fps = int(meta["frames"]), float(meta["fps"])
-        width, height = meta["viewport"]
+        _width, _height = meta["viewport"]
     except (KeyError, TypeError, ValueError):
         raise InputError("the facesvg metadata lacks frames, fps or viewport; the file is corrupt.") from None
-    times = np.arange(n_frames) / fps
+    return np.arange(n_frames) / fps
+
+
+def _svg_paths(root: etree._Element, meta: dict,
+               times: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """Per triangle path of a parsed facesvg SVG, in document order: its triangle ids (n,), their positions
+    (T, n, 3, 2) in viewport px at times, and where each is shown and where collapsed to a point (T, n)."""
+    width, height = meta["viewport"]
     vb = [float(x) for x in _NUMBER.findall(root.get("viewBox", f"0 0 {width} {height}"))]
     sx, sy = width / vb[2], height / vb[3]
     view = np.array([[sx, 0, -vb[0] * sx], [0, sy, -vb[1] * sy], [0, 0, 1]])
     hidden_classes = _hidden_classes(root)
-    tris, xys, shown, points = [], [], [], []
     group_cache: dict[etree._Element, tuple[np.ndarray, np.ndarray]] = {}  # keyed by element: id() of a freed
     # lxml proxy is reused by the next one, which handed nested groups another group's transform
     listed = [int(i) for i in meta.get("triangle_order", [])]
@@ -381,14 +401,62 @@ def evaluate(data: bytes) -> Evaluated:
         if own:
             mat = mat @ _parse_transform(own)
         xy = apply_linear(mat[:, :2, :2], xy) + mat[:, None, None, :2, 2]
-        tris.extend(ids)
-        xys.append(xy)
-        shown.append(vis[:, None] & ~point)
-        points.append(vis[:, None] & point)
-    if not tris:
-        raise InputError("the SVG has no triangle paths (id f<number>); only facesvg output can be verified.")
-    return Evaluated(meta, np.array(tris), np.concatenate(xys, axis=1), np.concatenate(shown, axis=1),
-                     np.concatenate(points, axis=1))
+        yield np.array(ids, np.int64), xy, vis[:, None] & ~point, vis[:, None] & point
+
+
+class _Tally:
+    """compare's figures, gathered a block of paths at a time: the (T, P, 3, 2) positions of every path at once
+    were most of a long job's memory (8k triangles x 3,000 frames: 5 GB of the web job's 5.1 GB peak)."""
+
+    def __init__(self, exact_xy: np.ndarray, expected_visible: np.ndarray, faces: np.ndarray, tolerance: float):
+        self.exact, self.expected, self.faces, self.tolerance = exact_xy, expected_visible, faces, tolerance
+        self.drawn_tri = np.zeros((exact_xy.shape[0], len(faces)), bool)
+        self.tris: list[np.ndarray] = []
+        self.paths, self.count, self.total = 0, 0, 0.0
+        self.best: tuple[float, int, int, int] | None = None  # (px, -frame, -path, -vertex): argmax's first
+
+    def add(self, tris: np.ndarray, xy: np.ndarray, shown: np.ndarray, collapsed: np.ndarray | None) -> None:
+        """The next paths: triangle ids tris (n,), positions xy (T, n, 3, 2), shown and collapsed (T, n)."""
+        if tris.max() >= len(self.faces):
+            raise InputError("the SVG names triangles the input does not have; pass the input it was made from.")
+        dist = lengths(xy - np.take(self.exact, self.faces[tris], axis=1))  # (T, n, 3)
+        dist = np.where(np.isnan(dist), np.inf, dist)
+        if collapsed is not None:  # a visible triangle smaller than the tolerance may be drawn as its point
+            small = collapsed & np.take(self.expected, tris, axis=1) & (dist <= self.tolerance).all(axis=-1)
+            shown = shown | small
+        drawn = np.broadcast_to(shown[..., None], dist.shape)
+        d = dist[drawn]
+        if d.size:
+            self.count += d.size
+            self.total += float(d.sum())
+            k, p, v = np.unravel_index(np.argmax(np.where(drawn, dist, -1)), dist.shape)
+            best = (float(dist[k, p, v]), -int(k), -(self.paths + int(p)), -int(v))
+            if self.best is None or best > self.best:
+                self.best = best
+                self.worst = {"frame": int(k), "triangle": int(tris[p]), "vertex": int(v), "px": best[0]}
+        np.logical_or.at(self.drawn_tri.T, tris, shown.T)
+        self.tris.append(tris)
+        self.paths += len(tris)
+
+    def result(self) -> Verification:
+        """The Verification of every path added."""
+        tri_ids = np.unique(np.concatenate(self.tris))
+        wrong = np.take(self.drawn_tri, tri_ids, axis=1) != np.take(self.expected, tri_ids, axis=1)
+        absent = np.ones(len(self.faces), bool)
+        absent[tri_ids] = False
+        return Verification(
+            max_px=self.best[0] if self.count else 0.0,
+            mean_px=self.total / self.count if self.count else 0.0,
+            vertex_frames=self.count,
+            visibility_mismatches=int(wrong.sum()),
+            mismatch_frames=int(wrong.any(axis=1).sum()),
+            tolerance=float(self.tolerance),
+            frames=self.exact.shape[0],
+            paths=self.paths,
+            triangles=len(tri_ids),
+            dropped_visible=int((self.expected[:, absent].any(axis=0)).sum()),
+            worst=self.worst if self.count else {},
+        )
 
 
 def compare(ev: Evaluated, exact_xy: np.ndarray, expected_visible: np.ndarray, faces: np.ndarray,
@@ -397,57 +465,77 @@ def compare(ev: Evaluated, exact_xy: np.ndarray, expected_visible: np.ndarray, f
     t = ev.xy.shape[0]
     if exact_xy.shape[0] != t:
         raise InputError(f"the SVG has {t} frames but the input gives {exact_xy.shape[0]}; pass the same input.")
-    if ev.triangles.max() >= len(faces):
-        raise InputError("the SVG names triangles the input does not have; pass the input it was made from.")
-    exact = np.take(exact_xy, faces[ev.triangles], axis=1)  # (T, P, 3, 2)
-    dist = lengths(ev.xy - exact)  # (T, P, 3)
-    dist = np.where(np.isnan(dist), np.inf, dist)
-    shown = ev.shown
-    if ev.collapsed is not None:  # a visible triangle smaller than the tolerance may be drawn as its point
-        small = ev.collapsed & np.take(expected_visible, ev.triangles, axis=1) & (dist <= tolerance).all(axis=-1)
-        shown = shown | small
-    drawn = shown[..., None] & np.ones(3, bool)
-    d = dist[drawn]
-    worst: dict[str, Any] = {}
-    if d.size:
-        k, p, v = np.unravel_index(np.argmax(np.where(drawn, dist, -1)), dist.shape)
-        worst = {"frame": int(k), "triangle": int(ev.triangles[p]), "vertex": int(v), "px": float(dist[k, p, v])}
-    tri_ids = np.unique(ev.triangles)
-    drawn_tri = np.zeros((t, len(faces)), bool)
-    np.logical_or.at(drawn_tri.T, ev.triangles, shown.T)
-    wrong = np.take(drawn_tri, tri_ids, axis=1) != np.take(expected_visible, tri_ids, axis=1)
-    absent = np.ones(len(faces), bool)
-    absent[tri_ids] = False
-    return Verification(
-        max_px=float(d.max()) if d.size else 0.0,
-        mean_px=float(d.mean()) if d.size else 0.0,
-        vertex_frames=int(d.size),
-        visibility_mismatches=int(wrong.sum()),
-        mismatch_frames=int(wrong.any(axis=1).sum()),
-        tolerance=float(tolerance),
-        frames=t,
-        paths=len(ev.triangles),
-        triangles=len(tri_ids),
-        dropped_visible=int((expected_visible[:, absent].any(axis=0)).sum()),
-        worst=worst,
-    )
+    tally = _Tally(exact_xy, expected_visible, faces, tolerance)
+    tally.add(ev.triangles, ev.xy, ev.shown, ev.collapsed)
+    return tally.result()
+
+
+def exact_projection(anim, camera: Camera, frames: slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel xy (T, V, 2) float64 and culled visibility (T, F) of anim's frames with camera, projected a block of
+    frames at a time (all at once, the float64 copies of a long capture took GBs)."""
+    src = anim.frames[frames]
+    t = src.shape[0]
+    xy = np.empty((t, src.shape[1], 2))
+    visible = np.empty((t, len(anim.faces)), bool)
+    for a in range(0, t, FRAME_BLOCK):
+        sl = slice(a, min(a + FRAME_BLOCK, t))
+        bxy, ndc_z, w = camera.project(src[sl])
+        xy[sl] = bxy
+        visible[sl] = cull(bxy, ndc_z, w, anim.faces, camera.width, camera.height)
+    return xy, visible
 
 
 def verify_animation(data: bytes, anim, tolerance: float | None = None) -> Verification:
-    """Verify SVG bytes against an already prepared FaceAnimation (the exact 3D the SVG should show)."""
-    ev = evaluate(data)
-    camera = Camera.from_json(ev.meta["camera"])
-    xy, ndc_z, w = camera.project(anim.frames)
-    visible = cull(xy, ndc_z, w, anim.faces, camera.width, camera.height)
-    tol = tolerance if tolerance is not None else float(ev.meta.get("options", {}).get("tolerance", 0.25))
-    encoding = ev.meta.get("encoding", {})
+    """Verify SVG bytes against an already prepared FaceAnimation (the exact 3D the SVG should show); an SVG's
+    paths are evaluated and measured a block at a time."""
+    if player.is_player(data):
+        ev = evaluate(data)
+        meta, n_frames, parts = ev.meta, ev.xy.shape[0], iter([(ev.triangles, ev.xy, ev.shown, ev.collapsed)])
+    else:
+        root = read_svg(data)
+        meta = metadata_of(root)
+        times = _svg_times(meta)
+        n_frames, parts = len(times), _blocks(_svg_paths(root, meta, times), len(times))
+    camera = Camera.from_json(meta["camera"])
+    tol = tolerance if tolerance is not None else float(meta.get("options", {}).get("tolerance", 0.25))
+    encoding = meta.get("encoding", {})
+    frames = slice(None)
     if encoding.get("mode") == "still":  # a still (--frame K) shows frame K only
         k = int(encoding.get("frame", 0))
-        if not 0 <= k < anim.n_frames or ev.xy.shape[0] != anim.n_frames:
+        if not 0 <= k < anim.n_frames or n_frames != anim.n_frames:
             raise InputError("the still's frame is not in the input; pass the input it was made from.")
-        ev = Evaluated(ev.meta, ev.triangles, ev.xy[k:k + 1], ev.shown[k:k + 1], ev.collapsed[k:k + 1])
-        xy, visible = xy[k:k + 1], visible[k:k + 1]
-    return compare(ev, xy, visible, anim.faces, tol)
+        frames = slice(k, k + 1)
+    elif anim.n_frames != n_frames:
+        raise InputError(f"the SVG has {n_frames} frames but the input gives {anim.n_frames}; pass the same input.")
+    tally = _Tally(*exact_projection(anim, camera, frames), anim.faces, tol)
+    for tris, xy, shown, collapsed in parts:
+        tally.add(tris, xy[frames], shown[frames], None if collapsed is None else collapsed[frames])
+    if not tally.paths:
+        raise InputError(NO_PATHS)
+    return tally.result()
+
+
+def _blocks(paths: Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+            n_frames: int) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """_svg_paths' paths joined into blocks of about BLOCK_BYTES of positions."""
+    size = max(1, BLOCK_BYTES // max(48 * n_frames, 1))  # triangles a block
+    part: list = []
+    n = 0
+    for path in paths:
+        part.append(path)
+        n += len(path[0])
+        if n >= size:
+            yield _joined(part)
+            part, n = [], 0
+    if part:
+        yield _joined(part)
+
+
+def _joined(part: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Consecutive paths as one block (ids, positions, shown, collapsed)."""
+    tris, xys, shown, points = zip(*part)
+    return (np.concatenate(tris), np.concatenate(xys, axis=1), np.concatenate(shown, axis=1),
+            np.concatenate(points, axis=1))
 
 
 def verify_file(svg_path: str | Path, input_path: str | Path, cache: str | Path | None = None,

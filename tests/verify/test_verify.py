@@ -185,3 +185,47 @@ def test_still_frames_verify_against_their_frame():
     assert v.ok and v.frames == 1 and v.vertex_frames > 100
     wrong = data.replace(b'"frame":9', b'"frame":10')
     assert not verify_animation(wrong, anim).ok
+
+
+def test_a_block_at_a_time_measures_what_all_the_paths_at_once_measure(sample_path, monkeypatch):
+    """verify_animation evaluates and measures an SVG's paths a block at a time (a long capture's whole (T, P, 3, 2)
+    positions took GBs): the figures, the worst vertex included, are those of every path measured at once."""
+    from converter import formats, verify
+
+    anim = formats.load(sample_path).sliced(0, 30)
+    data = convert_animation(anim, ConversionOptions(size=96)).data
+    ev = evaluate(data)
+    camera = verify.Camera.from_json(ev.meta["camera"])
+    whole = verify.compare(ev, *verify.exact_projection(anim, camera), anim.faces, 0.25)
+    sizes = []
+    real_add = verify._Tally.add
+
+    def add(self, tris, *args):
+        sizes.append(len(tris))
+        return real_add(self, tris, *args)
+
+    monkeypatch.setattr(verify._Tally, "add", add)
+    monkeypatch.setattr(verify, "BLOCK_BYTES", 48 * 30 * 200)  # about 200 triangles a block
+    blocked = verify_animation(data, anim)
+    assert len(sizes) >= 5 and max(sizes) < 300 and sum(sizes) == len(ev.triangles)
+    assert blocked == whole and blocked.worst == whole.worst and blocked.vertex_frames > 0
+
+
+def test_the_worst_vertex_is_the_first_in_frame_path_vertex_order_whatever_the_blocks():
+    """Blocks split the paths, while the whole measure reads (frame, path, vertex) in that order: of equal
+    deviations the earliest frame wins even when its path comes in a later block."""
+    from converter import verify
+
+    t, faces = 4, np.array([[0, 1, 2], [3, 4, 5]])
+    exact = np.zeros((t, 6, 2))
+    xy = np.zeros((t, 2, 3, 2))
+    xy[3, 0, 1, 0] = 0.2  # path 0's largest deviation, frame 3
+    xy[1, 1, 2, 1] = 0.2  # path 1's, the same, frame 1: first in the whole array's order
+    shown, visible = np.ones((t, 2), bool), np.ones((t, 2), bool)
+    ev = verify.Evaluated({}, np.array([0, 1]), xy, shown)
+    whole = verify.compare(ev, exact, visible, faces, 0.25)
+    tally = verify._Tally(exact, visible, faces, 0.25)
+    tally.add(np.array([0]), xy[:, :1], shown[:, :1], None)
+    tally.add(np.array([1]), xy[:, 1:], shown[:, 1:], None)
+    assert whole.worst == {"frame": 1, "triangle": 1, "vertex": 2, "px": pytest.approx(0.2)}
+    assert tally.result() == whole
