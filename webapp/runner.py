@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import gzip
 import io
 import json
 import logging
 import os
+import tempfile
 import time
 import traceback
 
@@ -16,6 +18,7 @@ import numpy as np
 from PIL import Image
 
 from converter import mpeg4
+from converter.animation import FaceAnimation
 from converter.convert import convert
 from converter.errors import FacesvgError
 from converter.extract import extract, fit_camera
@@ -175,13 +178,31 @@ def job_options(job: Job, storage: Storage):
 def perform(job: Job, storage: Storage, progress, preview_frames: int = 48) -> dict:
     """Convert the job's input, write every output and the 3D prerenders; returns the result summary."""
     options = job_options(job, storage)
-    kind = output_kind(options.to)
-    inputs, out = storage.inputs(job.id), storage.out(job.id)
+    inputs = storage.inputs(job.id)
     cache = inputs / job.files["cache"] if "cache" in job.files else None
-    prepared = []
-    result = convert(inputs / job.files["input"], options, progress=lambda s, f: progress(s, CONVERT_SHARE * f),
-                     cache=cache, on_prepared=prepared.append)
-    anim = prepared[0]
+    # The 3D frames are set aside in an anonymous file (gone with it, or with the process) while the writer runs,
+    # then mapped back for the verifier and the prerender: held, they added to the writer's peak (the ICT head x
+    # 4,000 frames: 1.3 GB). Written with tofile, not through a mapping, so they leave this process's memory.
+    with tempfile.TemporaryFile(dir=storage.job_dir(job.id), prefix=".frames-") as aside:
+        rest: dict = {}
+
+        def set_aside(anim: FaceAnimation) -> None:
+            anim.frames.tofile(aside)
+            aside.flush()
+            rest.update(shape=anim.frames.shape,
+                        fields={f.name: getattr(anim, f.name) for f in dataclasses.fields(anim) if f.name != "frames"})
+
+        result = convert(inputs / job.files["input"], options,
+                         progress=lambda s, f: progress(s, CONVERT_SHARE * f), cache=cache, on_prepared=set_aside)
+        anim = FaceAnimation(np.memmap(aside, np.float32, "r", shape=rest["shape"]), **rest["fields"])
+        return _finish(job, storage, progress, preview_frames, options, result, anim)
+
+
+def _finish(job: Job, storage: Storage, progress, preview_frames: int, options: ConversionOptions, result,
+            anim: FaceAnimation) -> dict:
+    """perform's outputs after the conversion: every output file, the verifier's figures, the 3D prerenders."""
+    kind = output_kind(options.to)
+    out = storage.out(job.id)
     if kind.takes_fap_stream:  # e.g. the fap2d package plays the stream: prerender the 3D face it drives
         anim = mpeg4.drive(anim, options.fap, options.fdp, fps=options.fps)
     # Every file of the kind: the main one and its variants (the SVG and its gzip).

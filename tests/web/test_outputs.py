@@ -7,10 +7,12 @@ import os
 import re
 import subprocess
 import sys
+import time
 import urllib.parse
 import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from conftest import ROOT, SAMPLE, SMALL_DATA
@@ -62,3 +64,48 @@ def test_cli_registers_serve_and_worker():
                              env={**os.environ, "FACESVG_RQ_MAINTENANCE_SECONDS": bad})
         assert out.returncode == 2 and "FACESVG_RQ_MAINTENANCE_SECONDS" in out.stderr, out.stderr
         assert "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1, out.stderr
+
+
+def test_a_job_sets_its_3d_frames_aside_while_the_writer_runs(tmp_path, monkeypatch):
+    """The runner keeps the prepared animation for the verifier and the prerender, but not in memory while the
+    writer runs (its peak): the frames wait in an anonymous file, and what is verified and drawn is still them."""
+    import weakref
+
+    from converter.outputs import output_kind
+    from web.conftest import glb_bytes
+    from webapp import runner
+    from webapp.jobstore import DONE, Job, SQLiteStore
+    from webapp.storage import Storage
+
+    refs, alive, verified = [], [], []
+    real_convert, kind = runner.convert, output_kind("svg")
+    real_write, real_verify = kind.shading_writers["flat"], runner.verify_animation
+
+    def convert(*args, on_prepared, **kwargs):
+        def seen(anim):
+            refs.append((weakref.ref(anim.frames), anim.frames.copy()))
+            on_prepared(anim)
+        return real_convert(*args, on_prepared=seen, **kwargs)
+
+    def write(*args, **kwargs):
+        alive.extend(ref() is not None for ref, _ in refs)  # no gc.collect: freed by reference counting
+        return real_write(*args, **kwargs)
+
+    def verify(svg, anim):
+        verified.append(np.array_equal(anim.frames, refs[0][1]))
+        return real_verify(svg, anim)
+
+    monkeypatch.setattr(runner, "convert", convert)
+    monkeypatch.setattr(runner, "verify_animation", verify)
+    monkeypatch.setitem(kind.shading_writers, "flat", write)
+    store, storage = SQLiteStore(tmp_path / "t.sqlite3"), Storage(tmp_path / "jobs")
+    job_id = "c" * 32
+    (storage.inputs(job_id) / "input.glb").write_bytes(glb_bytes())
+    store.add(Job(id=job_id, created=time.time(), kind="glb", options={"size": 48}, files={"input": "input.glb"}))
+    assert store.claim(job_id, "w", 60)
+    assert runner.execute(store, storage, job_id, "w", 60, 2) == DONE
+    job = store.get(job_id)
+    store.close()
+    assert alive == [False] and verified == [True]
+    assert job.result["report"]["figures"]["within_tolerance"] and job.result["preview_frames"]
+    assert sorted(p.name for p in storage.job_dir(job_id).iterdir()) == ["events.log", "inputs", "out"]
