@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numba
 import numpy as np
 from lxml import etree
 
@@ -45,6 +46,10 @@ NO_PATHS = "the SVG has no triangle paths (id f<number>); only facesvg output ca
 BLOCK_BYTES = 1 << 25  # paths measured at once: about this many bytes of their (T, n, 3, 2) float64 positions
 FRAME_BLOCK = 256  # frames projected at once
 _TOKEN = re.compile(r"[MmLlZzHhVv]|[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+_VALUE_TOKEN = re.compile(";|" + _TOKEN.pattern)  # an animate's values: their tokens and where each value ends
+_SEMI, _M, _L, _H, _V, _Z = (ord(c) for c in ";MLHVZ")
+_CODES = frozenset(";MmLlHhVvZz")
+_POW10 = np.array([float(10 ** k) for k in range(16)])  # exact doubles
 _NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
 
@@ -166,53 +171,175 @@ def _key_index(anim: etree._Element, n: int, u: np.ndarray, discrete: bool) -> t
 def _triangles_of_d(d: str) -> list[float]:
     """The first three absolute vertices of each subpath of a path made of M/L/H/V/Z commands (relative or
     absolute), flattened: 6 numbers per triangle (a merged path holds several, converter.encode.merge)."""
-    out: list[float] = []
-    pts: list[tuple[float, float]] = []
-    cmd = ""
-    x = y = 0.0
-    start = (0.0, 0.0)
-    nums: list[float] = []
+    return _d_rows(d, values=False)[0].tolist()
 
-    def close() -> None:
-        if pts:
-            if len(pts) < 3:
-                raise InputError("a path has fewer than 3 vertices; the file is corrupt.")
-            out.extend([pts[0][0], pts[0][1], pts[1][0], pts[1][1], pts[2][0], pts[2][1]])
-            pts.clear()
 
-    for tok in _TOKEN.findall(d):
-        if tok.isalpha():
-            cmd, nums = tok, []
-            if cmd in ("Z", "z"):
-                close()
-                x, y = start  # after a closepath the current point is the subpath's start
-            continue
-        nums.append(float(tok))
-        c = cmd.upper()
-        rel = cmd.islower()
-        if c in ("M", "L") and len(nums) == 2:
-            if c == "M":
-                close()
-            x, y = (x + nums[0], y + nums[1]) if rel else (nums[0], nums[1])
-            if c == "M":
-                start = (x, y)
-            pts.append((x, y))
-            nums = []
-            if cmd in ("M", "m"):  # further pairs after M are implicit linetos
-                cmd = "l" if rel else "L"
-        elif c in ("H", "V") and len(nums) == 1:
-            if c == "H":
-                x = x + nums[0] if rel else nums[0]
-            else:
-                y = y + nums[0] if rel else nums[0]
-            pts.append((x, y))
-            nums = []
-        elif c not in ("M", "L", "H", "V"):
-            raise InputError(f"path command {cmd!r} is not a triangle; only M/L/H/V/Z paths can be verified.")
-    close()
-    if not out:
+def _d_rows(text: str, values: bool = True) -> np.ndarray:
+    """(K, 6 n): _triangles_of_d of each value of an animate's values (split at ';', blank ones left out), or with
+    values False of text as one path's d. A compiled scanner finds the tokens as _TOKEN does and reads the numbers
+    (those float() would not read to the same bits by a division are read by float()), and a compiled loop reads
+    the paths: per value in Python, with the regular expression, they were most of the verifier's time."""
+    blank = np.array([not v.strip() for v in text.split(";")]) if values else np.zeros(1, bool)
+    if text.isascii():
+        raw = np.frombuffer(text.encode("ascii"), np.uint8)
+        code, nums, spans = np.empty(len(raw), np.int64), np.empty(len(raw)), np.empty((len(raw), 3), np.int64)
+        n, slow = _tokens(raw, values, code, nums, spans)
+        code, nums = code[:n], nums[:n]
+        for at, a, b in spans[:slow].tolist():  # an exponent, or more digits than a double holds exactly
+            nums[at] = float(raw[a:b].tobytes())
+    else:  # _TOKEN's \d also takes other scripts' digits, which float() reads too
+        tokens = (_VALUE_TOKEN if values else _TOKEN).findall(text)
+        code = np.array([ord(t) if t in _CODES else 0 for t in tokens], np.int64)
+        nums = np.array([0.0 if t in _CODES else float(t) for t in tokens])
+        n = len(tokens)
+    out = np.empty(2 * n)  # a triangle is 3 points of one number at least each (H, V): 6 numbers from 3 tokens
+    ends = np.zeros(len(blank), np.int64)
+    err = np.zeros(2, np.int64)
+    _read_paths(code, nums, blank, out, ends, err)
+    if err[0] == 1:
         raise InputError("a path has fewer than 3 vertices; the file is corrupt.")
-    return out
+    if err[0] == 2:
+        cmd = chr(err[1]) if err[1] else ""
+        raise InputError(f"path command {cmd!r} is not a triangle; only M/L/H/V/Z paths can be verified.")
+    widths = np.diff(ends, prepend=0)[~blank]
+    if len(widths) == 0:
+        return np.zeros((0, 0))
+    if (widths != widths[0]).any():
+        raise InputError("the values of a d animation hold different numbers of triangles; the file is corrupt.")
+    return out[:ends[-1]].reshape(len(widths), widths[0])
+
+
+@numba.njit(cache=True, nogil=True)
+def _tokens(raw, values, code, nums, spans):  # pragma: no cover - compiled
+    """_TOKEN's matches in the bytes raw, left to right (and each ';' when values): per token its code (the
+    command's or ';''s character, 0 for a number) and number. A number of at most 15 digits and no exponent is
+    its digits over a power of ten (both exact, so one correctly rounded division: float()'s bits); the others
+    are listed in spans (token, start, end) for float(). Returns (tokens, slow numbers)."""
+    n, slow, i, size = 0, 0, 0, len(raw)
+    while i < size:
+        c = raw[i]
+        if c == 77 or c == 109 or c == 76 or c == 108 or c == 90 or c == 122 or c == 72 or c == 104 \
+                or c == 86 or c == 118 or (values and c == 59):  # MmLlZzHhVv ;
+            code[n] = c
+            n += 1
+            i += 1
+            continue
+        j = i + 1 if c == 43 or c == 45 else i  # a sign
+        digits, frac, mant = 0, 0, 0
+        while j < size and 48 <= raw[j] <= 57:
+            mant = mant * 10 + (raw[j] - 48) if digits < 18 else mant
+            digits += 1
+            j += 1
+        if j < size and raw[j] == 46 and (digits or (j + 1 < size and 48 <= raw[j + 1] <= 57)):  # '.'
+            j += 1
+            while j < size and 48 <= raw[j] <= 57:
+                mant = mant * 10 + (raw[j] - 48) if digits < 18 else mant
+                digits += 1
+                frac += 1
+                j += 1
+        if digits == 0:  # no number here: the character is skipped
+            i += 1
+            continue
+        exp = False
+        if j < size and (raw[j] == 101 or raw[j] == 69):  # an exponent only with a digit after its sign
+            k = j + 1 + (1 if j + 1 < size and (raw[j + 1] == 43 or raw[j + 1] == 45) else 0)
+            if k < size and 48 <= raw[k] <= 57:
+                exp = True
+                j = k
+                while j < size and 48 <= raw[j] <= 57:
+                    j += 1
+        code[n] = 0
+        if exp or digits > 15:
+            spans[slow, 0], spans[slow, 1], spans[slow, 2] = n, i, j
+            slow += 1
+            nums[n] = 0.0
+        else:
+            v = np.float64(mant) / _POW10[frac]
+            nums[n] = -v if c == 45 else v
+        n += 1
+        i = j
+    return n, slow
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _close(out, m, px, py, npts) -> int:  # pragma: no cover - compiled
+    """A subpath's first triangle (px, py: its first 3 of npts vertices) into out at m: the next m (m itself for
+    an empty subpath), -1 for one of fewer than 3 vertices. (out holds 2 numbers a token: a triangle is 3 points of
+    one number at least each, H or V.)"""
+    if npts == 0:
+        return m
+    if npts < 3:
+        return -1
+    for k in range(3):
+        out[m + 2 * k], out[m + 2 * k + 1] = px[k], py[k]
+    return m + 6
+
+
+@numba.njit(cache=True, nogil=True)
+def _read_paths(code, nums, blank, out, ends, err) -> None:  # pragma: no cover - compiled
+    """_d_rows' loop over the tokens (code: a command's or ';''s character, 0 for a number nums[i]): the
+    triangles of value v into out, ending at ends[v]; err (kind, character) at the first error (1: fewer than 3
+    vertices, 2: not an M/L/H/V command), as _triangles_of_d raised them value by value."""
+    i, m, n = 0, 0, len(code)
+    px = np.empty(3)
+    py = np.empty(3)
+    for v in range(len(blank)):
+        begin = m
+        cmd, have, first_num = 0, 0, 0.0  # the command, numbers of its pair read (0 or 1), the first of them
+        x = y = sx = sy = 0.0
+        npts = 0
+        while i < n and code[i] != _SEMI:
+            c = code[i]
+            i += 1
+            closing = False
+            if c != 0:
+                cmd, have = c, 0
+                closing = c == _Z or c == _Z + 32
+            else:
+                up = cmd - 32 if cmd >= 97 else cmd
+                rel = cmd >= 97
+                if up == _M or up == _L:
+                    if have == 0:
+                        first_num, have = nums[i - 1], 1
+                        continue
+                    have = 0
+                    if up == _M:  # a moveto closes the subpath before it
+                        m, npts = _close(out, m, px, py, npts), 0
+                        if m < 0:
+                            err[0] = 1
+                            return
+                    if rel:
+                        x, y = x + first_num, y + nums[i - 1]
+                    else:
+                        x, y = first_num, nums[i - 1]
+                    if up == _M:
+                        sx, sy = x, y
+                        cmd = _L + 32 if rel else _L  # further pairs after M are implicit linetos
+                elif up == _H or up == _V:
+                    if up == _H:
+                        x = x + nums[i - 1] if rel else nums[i - 1]
+                    else:
+                        y = y + nums[i - 1] if rel else nums[i - 1]
+                else:
+                    err[0], err[1] = 2, cmd
+                    return
+                if npts < 3:
+                    px[npts], py[npts] = x, y
+                npts += 1
+                continue
+            if closing:
+                m, npts = _close(out, m, px, py, npts), 0
+                if m < 0:
+                    err[0] = 1
+                    return
+                x, y = sx, sy  # after a closepath the current point is the subpath's start
+        i += 1  # past the ';'
+        if not blank[v]:
+            m = _close(out, m, px, py, npts)
+            if m <= begin:  # fewer than 3 vertices in the last subpath, or no triangle at all
+                err[0] = 1
+                return
+        ends[v] = m
 
 
 def _hidden_classes(root: etree._Element) -> set[str]:
@@ -260,12 +387,11 @@ def _path_xy(el: etree._Element, times: np.ndarray) -> np.ndarray:
         mode = anim.get("calcMode", "linear")
         if mode not in ("linear", "discrete"):
             raise InputError(f"calcMode {mode!r} on d cannot be verified; use linear or discrete.")
-        rows = [_triangles_of_d(v) for v in anim.get("values", "").split(";") if v.strip()]
-        if len(rows) == 0:
+        values = _d_rows(anim.get("values", ""))
+        if len(values) == 0:
             raise InputError("an <animate> of d has no values; the file is corrupt.")
-        if len({len(r) for r in rows} | {out.shape[1]}) > 1:
+        if values.shape[1] != out.shape[1]:
             raise InputError("the values of a d animation hold different numbers of triangles; the file is corrupt.")
-        values = np.array(rows, np.float64)
         u, on = _phase(anim, times)
         i, frac = _key_index(anim, len(values), u, discrete=mode == "discrete")
         j = np.minimum(i + 1, len(values) - 1)
@@ -373,6 +499,8 @@ def _svg_paths(root: etree._Element, meta: dict,
     hidden_classes = _hidden_classes(root)
     group_cache: dict[etree._Element, tuple[np.ndarray, np.ndarray]] = {}  # keyed by element: id() of a freed
     # lxml proxy is reused by the next one, which handed nested groups another group's transform
+    chains: dict[etree._Element | None, tuple[np.ndarray, np.ndarray]] = {}  # by a path's nearest group: the
+    # view's map times its groups' maps, and where they are all shown
     listed = [int(i) for i in meta.get("triangle_order", [])]
     at = 0  # a path of n triangles draws the next n of the metadata's triangle_order
     for el in root.iter(f"{SVG_NS}path"):
@@ -388,15 +516,18 @@ def _svg_paths(root: etree._Element, meta: dict,
         at += n
         xy = flat.reshape(len(times), n, 3, 2)
         point = (xy == xy[:, :, :1]).all(axis=(2, 3))  # (T, n)
-        vis = _shown(el, times, hidden_classes)
-        mat = np.broadcast_to(view, (len(times), 3, 3))
-        for anc in reversed(list(el.iterancestors(f"{SVG_NS}g"))):
-            key = anc
-            if key not in group_cache:
-                group_cache[key] = (_group_matrices(anc, times), _shown(anc, times, hidden_classes))
-            gm, gv = group_cache[key]
-            mat = mat @ gm
-            vis = vis & gv
+        nearest = next(el.iterancestors(f"{SVG_NS}g"), None)
+        if nearest not in chains:  # the paths of a group share its chain of maps (per path: 13 of 80 s, 3,000 frames)
+            mat, shown = np.broadcast_to(view, (len(times), 3, 3)), np.ones(len(times), bool)
+            for anc in reversed(list(el.iterancestors(f"{SVG_NS}g"))):
+                if anc not in group_cache:
+                    group_cache[anc] = (_group_matrices(anc, times), _shown(anc, times, hidden_classes))
+                gm, gv = group_cache[anc]
+                mat = mat @ gm
+                shown = shown & gv
+            chains[nearest] = (mat, shown)
+        mat, shown = chains[nearest]
+        vis = _shown(el, times, hidden_classes) & shown
         own = el.get("transform")
         if own:
             mat = mat @ _parse_transform(own)

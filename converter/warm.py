@@ -3,8 +3,9 @@
 numba compiles a kernel on its first call and caches the machine code beside its module (or under
 NUMBA_CACHE_DIR), keyed by the source file. A fresh install's first conversion would otherwise spend ~20 s of
 CPU compiling before it converts anything, each web worker's first job too (BENCHMARKS.md, start-up). Warming
-converts the bundled sample's first frames in memory, once per job in WARM_JOBS, and writes nothing but the
-cache; once the cache is warm it takes about as long as those tiny conversions.
+converts the bundled sample's first frames in memory, once per job in WARM_JOBS (and verifies the first, as the web
+worker verifies every job), and writes nothing but the cache; once the cache is warm it takes about as long as those
+tiny conversions.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from numba.core.registry import CPUDispatcher
 from converter.bundled import sample_path
 from converter.convert import convert_animation, load
 from converter.options import ConversionOptions, Progress, no_progress
+from converter.verify import verify_animation
 
 WARM_FRAMES = 12  # enough for every kernel to run (6 left the player's colour keys out); few: ~1 s once warm
 WARM_JOBS = (  # the jobs whose kernels (or their argument types) differ; fap2d runs none of its own
@@ -110,7 +112,9 @@ def warm(progress: Progress = no_progress, fresh: bool = False) -> Warmth:
         forget()
     anim = load(sample_path(), ConversionOptions()).sliced(0, WARM_FRAMES)
     for i, options in enumerate(WARM_JOBS):
-        convert_animation(anim, options, lambda stage, f, i=i: progress(stage, (i + f) / len(WARM_JOBS)))
+        result = convert_animation(anim, options, lambda stage, f, i=i: progress(stage, (i + f) / len(WARM_JOBS)))
+        if i == 0:  # the web worker verifies every job's output (the verifier's own kernels)
+            verify_animation(result.data, anim)
     found = kernels()
     paths = [k.stats.cache_path for k in found.values() if k.stats.cache_path]
     cache = os.path.commonpath(paths) if paths else ""

@@ -1,4 +1,5 @@
-"""`facesvg warm`: every kernel a conversion runs is compiled ahead, so that no conversion compiles one."""
+"""`facesvg warm`: every kernel a conversion (or the web job's verification) runs is compiled ahead, so that no
+conversion compiles one."""
 
 from __future__ import annotations
 
@@ -28,9 +29,12 @@ from converter import warm
 from converter.bundled import sample_path
 from converter.convert import convert
 from converter.options import ConversionOptions
+from converter.formats import load
+from converter.verify import verify_animation
 for options in (ConversionOptions(), ConversionOptions(shading="gouraud", end=30), ConversionOptions(to="player"),
                 ConversionOptions(frame=3), ConversionOptions(max_triangles=800, end=30)):
     convert(sample_path(), options)
+verify_animation(convert(sample_path(), ConversionOptions(end=30)).data, load(sample_path()).sliced(0, 30))
 found = warm.kernels()
 print(json.dumps({"compiled": warm._counts(found, "cache_misses"), "loaded": warm._counts(found, "cache_hits")}))
 """

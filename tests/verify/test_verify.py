@@ -229,3 +229,34 @@ def test_the_worst_vertex_is_the_first_in_frame_path_vertex_order_whatever_the_b
     tally.add(np.array([1]), xy[:, 1:], shown[:, 1:], None)
     assert whole.worst == {"frame": 1, "triangle": 1, "vertex": 2, "px": pytest.approx(0.2)}
     assert tally.result() == whole
+
+
+@pytest.mark.parametrize("values, rows", [
+    ("M1 2L3 4L5 6Z", [[1, 2, 3, 4, 5, 6]]),
+    ("m1 2 2 0 0 2z", [[1, 2, 3, 2, 3, 4]]),  # relative, the pairs after a moveto are linetos
+    ("M0 0H4V3Z;M1 1h2v2z", [[0, 0, 4, 0, 4, 3], [1, 1, 3, 1, 3, 3]]),
+    (" ;M0,0 L1,0 L0,1 Z; ", [[0, 0, 1, 0, 0, 1]]),  # blank values are left out
+    # after a closepath the current point is the subpath's start; 4 triangles from 22 tokens (24 numbers out)
+    ("M0 0H1 2ZH3 4 5ZH6 7 8ZH9 10 11Z", [[0, 0, 1, 0, 2, 0, 3, 0, 4, 0, 5, 0, 6, 0, 7, 0, 8, 0, 9, 0, 10, 0, 11, 0]]),
+    ("M1e1 -.5l+2. 0 0 1E0", [[10, -0.5, 12, -0.5, 12, 0.5]]),
+])
+def test_values_of_a_d_animation_are_read_as_triangles(values, rows):
+    from converter.verify import _d_rows
+
+    assert _d_rows(values).tolist() == rows
+
+
+@pytest.mark.parametrize("values, needle", [
+    ("M0 0L1 1Z", "fewer than 3"),
+    ("M0 0L1 0L0 1Z;M0 0L1 0Z", "fewer than 3"),
+    ("M0 0L1 0L0 1ZL2 2", "fewer than 3"),
+    ("M0 0L1 0L0 1Z;,", "fewer than 3"),  # a value with no token
+    ("1 2", "path command ''"),
+    ("M0 0L1 0L0 1Z3", "path command 'Z'"),
+    ("M0 0L1 0L0 1Z;M0 0L1 0L0 1ZM2 2L3 2L2 3Z", "different numbers of triangles"),
+])
+def test_bad_values_of_a_d_animation_raise_one_clear_error(values, needle):
+    from converter.verify import _d_rows
+
+    with pytest.raises(InputError, match=re.escape(needle)):
+        _d_rows(values)
