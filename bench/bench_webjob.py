@@ -113,11 +113,11 @@ def run() -> str:
         "one run, the same job through `runner.execute` by a scratch script; 1,282 MB for the command line then): "
         "the verifier evaluated every path of the SVG at every frame at once (float64 (T, P, 3, 2) positions, the "
         "exact ones and their difference, ~0.8 GB each here) and read each value of a d animation in Python (with a "
-        "regular expression, ~26 s here), and the worker held the 3D frames through the writer. The verifier now "
+        "regular expression, ~34 s here), and the worker held the 3D frames through the writer. The verifier now "
         "works a block of paths at a time and reads the values with a compiled scanner (`converter/verify.py`: the "
         "same figures), and the worker sets the frames aside in an anonymous file while the writer runs "
         "(`webapp/runner.py`). What is left of the web job's extra time is mostly the verifier's per-path work "
-        "(its animations' timing and the group transforms, per frame) and the previews.",
+        "(per path and frame: its animations' timing and its transform) and the previews.",
     ])
 
 
