@@ -23,7 +23,7 @@ from bench import usage
 TITLE = "A long conversion as a web job: its peak against the command line's (issue 16)"
 OUT = ROOT / "bench" / "out" / "webjob"
 FACE = (3000, 8000, 0)  # bench_scale's 8k-triangle face, 3,000 frames
-PREVIEWS = 8
+PREVIEWS = 48  # the server's default (FACESVG_PREVIEW_FRAMES)
 JOB_ID = "b" * 32
 
 
@@ -109,7 +109,7 @@ def run() -> str:
         "|---|---|---|---|---|",
         *rows,
         "",
-        "Before 2026-12-07 the same web job took 150.8 s CPU (135.9 s wall) and peaked at 5,083 MB (commit 818a15f, "
+        "Before 2026-12-07 the same web job took 166.0 s CPU (148.9 s wall) and peaked at 5,244 MB (commit 818a15f, "
         "one run, the same job through `runner.execute` by a scratch script; 1,282 MB for the command line then): "
         "the verifier evaluated every path of the SVG at every frame at once (float64 (T, P, 3, 2) positions, the "
         "exact ones and their difference, ~0.8 GB each here) and read each value of a d animation in Python (with a "
