@@ -434,6 +434,36 @@ def _transform_matrix(name: str, a: list[float]) -> np.ndarray:
     return t
 
 
+def _transform_stack(kind: str, rows: np.ndarray) -> np.ndarray:
+    """_transform_matrix of each row (T, w) of an animateTransform's values (T, 3, 3), built as arrays (a matrix a
+    frame in Python was most of the verifier's time on a long capture's groups); the angles through math's
+    functions, as _transform_matrix takes them, so the bits are the same."""
+    t, w = rows.shape
+    out = np.zeros((t, 3, 3))
+    out[:, 0, 0] = out[:, 1, 1] = out[:, 2, 2] = 1.0
+    if kind == "matrix" and w == 6:
+        out[:, 0, :], out[:, 1, :] = rows[:, [0, 2, 4]], rows[:, [1, 3, 5]]
+    elif kind == "translate":
+        out[:, 0, 2] = rows[:, 0]
+        if w > 1:
+            out[:, 1, 2] = rows[:, 1]
+    elif kind == "scale":
+        out[:, 0, 0], out[:, 1, 1] = rows[:, 0], rows[:, 1 if w > 1 else 0]
+    elif kind == "rotate" and w != 3:
+        r = [math.radians(a) for a in rows[:, 0].tolist()]
+        c, sn = np.array([math.cos(a) for a in r]), np.array([math.sin(a) for a in r])
+        out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1] = c, -sn, sn, c
+    elif kind in ("skewX", "skewY"):
+        tan = np.array([math.tan(math.radians(a)) for a in rows[:, 0].tolist()])
+        if kind == "skewX":
+            out[:, 0, 1] = tan
+        else:
+            out[:, 1, 0] = tan
+    else:  # a rotation about a point, or a transform the verifier does not know (which raises)
+        return np.stack([_transform_matrix(kind, list(row)) for row in rows])
+    return out
+
+
 def _group_matrices(g: etree._Element, times: np.ndarray) -> np.ndarray:
     """(T, 3, 3) transform of one element: static transform, then animateTransform (replace or sum)."""
     base = _parse_transform(g.get("transform", ""))
@@ -452,7 +482,7 @@ def _group_matrices(g: etree._Element, times: np.ndarray) -> np.ndarray:
         vals = np.array([v + [0.0] * (width - len(v)) if kind != "scale" or len(v) > 1 else v * 2 for v in values])
         j = np.minimum(i + 1, len(values) - 1)
         cur = vals[i] + frac[:, None] * (vals[j] - vals[i])
-        mats = np.stack([_transform_matrix(kind, list(row)) for row in cur])
+        mats = _transform_stack(kind, cur)
         mats = np.where(on[:, None, None], mats, np.eye(3))
         if anim.get("additive") == "sum" and acc is not None:
             acc = acc @ mats

@@ -260,3 +260,20 @@ def test_bad_values_of_a_d_animation_raise_one_clear_error(values, needle):
 
     with pytest.raises(InputError, match=re.escape(needle)):
         _d_rows(values)
+
+
+@pytest.mark.parametrize("kind, width", [("translate", 1), ("translate", 2), ("scale", 1), ("scale", 2), ("rotate", 1),
+                                         ("rotate", 3), ("skewX", 1), ("skewY", 1), ("matrix", 6)])
+def test_a_transform_per_frame_is_built_with_the_bits_of_one_built_alone(kind, width):
+    from converter.verify import _transform_matrix, _transform_stack
+
+    rows = np.random.default_rng(7).normal(0, 40, (64, width)) * np.logspace(-3, 3, 64)[:, None]
+    alone = np.stack([_transform_matrix(kind, list(row)) for row in rows])
+    assert _transform_stack(kind, rows).tobytes() == alone.tobytes()
+
+
+def test_a_transform_the_verifier_does_not_know_raises_one_clear_error():
+    from converter.verify import _transform_stack
+
+    with pytest.raises(InputError, match="cannot be verified"):
+        _transform_stack("matrix", np.ones((3, 5)))
