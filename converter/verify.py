@@ -410,38 +410,26 @@ def _parse_transform(text: str) -> np.ndarray:
 
 
 def _transform_matrix(name: str, a: list[float]) -> np.ndarray:
-    t = np.eye(3)
-    if name == "matrix" and len(a) == 6:
-        t[0, :] = [a[0], a[2], a[4]]
-        t[1, :] = [a[1], a[3], a[5]]
-    elif name == "translate":
-        t[0, 2], t[1, 2] = a[0], (a[1] if len(a) > 1 else 0.0)
-    elif name == "scale":
-        t[0, 0], t[1, 1] = a[0], (a[1] if len(a) > 1 else a[0])
-    elif name == "rotate":
-        r = math.radians(a[0])
-        c, s = math.cos(r), math.sin(r)
-        rot = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
-        if len(a) == 3:
-            return _transform_matrix("translate", a[1:]) @ rot @ _transform_matrix("translate", [-a[1], -a[2]])
-        t = rot
-    elif name == "skewX":
-        t[0, 1] = math.tan(math.radians(a[0]))
-    elif name == "skewY":
-        t[1, 0] = math.tan(math.radians(a[0]))
-    else:
-        raise InputError(f"transform {name}({a}) cannot be verified.")
-    return t
+    """The 3x3 matrix of one SVG transform function name(a...)."""
+    if name == "rotate" and len(a) == 3:  # about the point (a[1], a[2])
+        return (_transform_matrix("translate", a[1:]) @ _transform_matrix("rotate", a[:1])
+                @ _transform_matrix("translate", [-a[1], -a[2]]))
+    return _transform_stack(name, np.array([a], np.float64).reshape(1, len(a)))[0]
 
 
 def _transform_stack(kind: str, rows: np.ndarray) -> np.ndarray:
-    """_transform_matrix of each row (T, w) of an animateTransform's values (T, 3, 3), built as arrays (a matrix a
-    frame in Python was most of the verifier's time on a long capture's groups); the angles through math's
-    functions, as _transform_matrix takes them, so the bits are the same."""
+    """The matrices (T, 3, 3) of the transform function kind with the arguments of each row of rows (T, w): an
+    animateTransform's values a frame each, built as arrays (a matrix a frame in Python was most of the verifier's
+    time on a long capture's groups), the angles through math's functions."""
     t, w = rows.shape
+    known = {"matrix": 6, "translate": 0, "scale": 0, "rotate": 0, "skewX": 0, "skewY": 0}  # kind: width it needs
+    if kind not in known or w == 0 or known[kind] not in (0, w):
+        raise InputError(f"transform {kind}({rows[0].tolist() if t else []}) cannot be verified.")
+    if kind == "rotate" and w == 3:
+        return np.stack([_transform_matrix(kind, row) for row in rows.tolist()])
     out = np.zeros((t, 3, 3))
     out[:, 0, 0] = out[:, 1, 1] = out[:, 2, 2] = 1.0
-    if kind == "matrix" and w == 6:
+    if kind == "matrix":
         out[:, 0, :], out[:, 1, :] = rows[:, [0, 2, 4]], rows[:, [1, 3, 5]]
     elif kind == "translate":
         out[:, 0, 2] = rows[:, 0]
@@ -449,18 +437,13 @@ def _transform_stack(kind: str, rows: np.ndarray) -> np.ndarray:
             out[:, 1, 2] = rows[:, 1]
     elif kind == "scale":
         out[:, 0, 0], out[:, 1, 1] = rows[:, 0], rows[:, 1 if w > 1 else 0]
-    elif kind == "rotate" and w != 3:
+    elif kind == "rotate":
         r = [math.radians(a) for a in rows[:, 0].tolist()]
         c, sn = np.array([math.cos(a) for a in r]), np.array([math.sin(a) for a in r])
         out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1] = c, -sn, sn, c
-    elif kind in ("skewX", "skewY"):
+    else:
         tan = np.array([math.tan(math.radians(a)) for a in rows[:, 0].tolist()])
-        if kind == "skewX":
-            out[:, 0, 1] = tan
-        else:
-            out[:, 1, 0] = tan
-    else:  # a rotation about a point, or a transform the verifier does not know (which raises)
-        return np.stack([_transform_matrix(kind, list(row)) for row in rows])
+        out[:, (0, 1)[kind == "skewY"], (1, 0)[kind == "skewY"]] = tan
     return out
 
 

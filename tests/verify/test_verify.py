@@ -273,7 +273,10 @@ def test_a_transform_per_frame_is_built_with_the_bits_of_one_built_alone(kind, w
 
 
 def test_a_transform_the_verifier_does_not_know_raises_one_clear_error():
-    from converter.verify import _transform_stack
+    from converter.verify import _parse_transform, _transform_stack
 
     with pytest.raises(InputError, match="cannot be verified"):
         _transform_stack("matrix", np.ones((3, 5)))
+    for text in ("translate()", "shear(3)", "matrix(1 0 0 1 0)"):
+        with pytest.raises(InputError, match="cannot be verified"):
+            _parse_transform(text)
