@@ -486,9 +486,7 @@ def evaluate(data: bytes) -> Evaluated:
     parts = list(_svg_paths(root, meta, _svg_times(meta)))
     if not parts:
         raise InputError(NO_PATHS)
-    tris, xys, shown, points = zip(*parts)
-    return Evaluated(meta, np.concatenate(tris), np.concatenate(xys, axis=1), np.concatenate(shown, axis=1),
-                     np.concatenate(points, axis=1))
+    return Evaluated(meta, *_joined(parts))
 
 
 def _svg_times(meta: dict) -> np.ndarray:
@@ -676,7 +674,7 @@ def _blocks(paths: Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray
 
 
 def _joined(part: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Consecutive paths as one block (ids, positions, shown, collapsed)."""
+    """Consecutive paths of _svg_paths as one (ids, positions, shown, collapsed)."""
     tris, xys, shown, points = zip(*part)
     return (np.concatenate(tris), np.concatenate(xys, axis=1), np.concatenate(shown, axis=1),
             np.concatenate(points, axis=1))
