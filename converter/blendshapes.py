@@ -9,6 +9,16 @@ Head yaw/pitch/roll turn the whole face rigidly about the centre of its rest bou
 anchor sits: the middle of the head); eye yaw/pitch/roll turn the face's eye parts (eye/iris) about each
 eyeball's fitted centre. Axes: yaw about +y (up), pitch about +x (the face's left), roll about +z (forward),
 applied as R = Ry(yaw) Rx(pitch) Rz(roll).
+
+VRM avatars (`match_face`): their expressions are targets of the face (converter/formats/morphs.py). By name, an
+expression wins over a raw morph of the same name (VRM's "perfect sync" avatars carry the 52 ARKit names as
+expressions over like-named morphs: the expressions are the avatar's own tuning). A face with VRM presets that names
+few of a capture's ARKit weights (a plain VRoid avatar) is driven through ARKIT_TO_VRM instead, the mapping
+carrying the table's weights; capture weights outside the table still drive targets of their names. An
+expression's weight is clamped to 0..1, an isBinary one is 1 above 0.5 and 0 otherwise, and VRM 1.0's
+overrideBlink/LookAt/Mouth (block, blend) then act on the procedural presets as the VRM 1.0 specification says
+(expressions.md, "Procedural override", and its isBinary interaction). extras["weights"]["route"] says which way
+the capture went: "names" or "vrm-table".
 """
 
 from __future__ import annotations
@@ -21,7 +31,8 @@ import numpy as np
 
 from converter.animation import FaceAnimation
 from converter.errors import InputError
-from converter.formats.morphs import MorphFace, load_morph_face
+from converter.formats.gltf.vrm import PROCEDURAL
+from converter.formats.morphs import ExpressionTarget, MorphFace, load_morph_face
 from converter.formats.weights import WeightTrack, read_weights
 from converter.mpeg4.tables import sphere_center
 from converter.options import Progress, no_progress, span
@@ -33,6 +44,34 @@ _SIDE = re.compile(r"(?:[._\s-](l|r|left|right)|(left|right))$", re.I)
 _PREFIX = re.compile(r"^(?:arkit|bs|blendshapes?|shapes?|morphs?)[_\-\s]+", re.I)
 FACE_READ_SHARE = 0.5  # of drive_file's progress, reading the face (an ICT head: 3 s; driving it by 1,000 frames
 # 0.6 s, by 4,000 2.4 s)
+
+# ARKit blendshape -> (VRM preset, weight) for avatars with VRM expressions but few ARKit-named targets. Our own
+# table, not a published one: each pairing follows Apple's description of the blendshape
+# (ARFaceAnchor.BlendShapeLocation) and the VRM 1.0 spec's meaning of the preset (expressions.md: aa/ih/ou/ee/oh are
+# the vowels a, i, u, e, o; blink*/look* the eyelids and gaze; happy, angry, sad, surprised). A pair of sided
+# weights (Left, Right) each give half, so both at 1 make the preset 1. Sides are the face's own, as in both specs.
+# Gaze: ARKit's eyeLookOutLeft and eyeLookInRight both turn the eyes to the face's left (lookLeft). relaxed has no
+# ARKit counterpart and is left undriven.
+ARKIT_TO_VRM: dict[str, tuple[tuple[str, float], ...]] = {
+    "jawOpen": (("aa", 1.0),),
+    "mouthFunnel": (("oh", 1.0),),  # lips rounded and open: o
+    "mouthPucker": (("ou", 1.0),),  # lips rounded and pushed out: u
+    "mouthStretchLeft": (("ih", 0.5),), "mouthStretchRight": (("ih", 0.5),),  # corners pulled wide: i
+    "mouthLowerDownLeft": (("ee", 0.5),), "mouthLowerDownRight": (("ee", 0.5),),  # lower lip down, teeth shown: e
+    "mouthSmileLeft": (("happy", 0.5),), "mouthSmileRight": (("happy", 0.5),),
+    "mouthFrownLeft": (("sad", 0.5),), "mouthFrownRight": (("sad", 0.5),),
+    "browDownLeft": (("angry", 0.5),), "browDownRight": (("angry", 0.5),),
+    "eyeWideLeft": (("surprised", 0.5),), "eyeWideRight": (("surprised", 0.5),),
+    "eyeBlinkLeft": (("blinkLeft", 1.0),), "eyeBlinkRight": (("blinkRight", 1.0),),
+    "eyeLookUpLeft": (("lookUp", 0.5),), "eyeLookUpRight": (("lookUp", 0.5),),
+    "eyeLookDownLeft": (("lookDown", 0.5),), "eyeLookDownRight": (("lookDown", 0.5),),
+    "eyeLookOutLeft": (("lookLeft", 0.5),), "eyeLookInRight": (("lookLeft", 0.5),),
+    "eyeLookInLeft": (("lookRight", 0.5),), "eyeLookOutRight": (("lookRight", 0.5),),
+}
+# A preset the face lacks passes its weight to another, times a factor: a one-sided blink to both eyes' blink.
+VRM_FALLBACK = {"blinkLeft": ("blink", 0.5), "blinkRight": ("blink", 0.5)}
+TABLE_ROUTE_NAMED = 0.5  # the table drives a VRM face when fewer than this share of the capture's table weights
+# find a target by name (a perfect-sync avatar names them all; a plain VRoid one none)
 
 
 def normalise(name: str) -> tuple[str, str]:
@@ -56,6 +95,33 @@ class Match:
     unmatched_weights: list[str]
     undriven_targets: list[str]
     duplicates: list[str]  # capture names that normalise like an earlier one (ignored)
+    route: str = "names"  # "names", or "vrm-table" when ARKIT_TO_VRM drove a VRM face's presets
+    notes: tuple[str, ...] = ()  # for the report's warnings
+    expressions: tuple[ExpressionTarget, ...] = ()  # the face's VRM expressions, whose rules weights() applies
+
+    def weights(self, values: np.ndarray, driven: np.ndarray) -> np.ndarray:
+        """(T, len(driven)) weights of the driven targets: values @ mapping, then the VRM expressions' rules."""
+        w = values @ self.mapping[:, driven]
+        column = {int(j): c for c, j in enumerate(driven)}
+        exprs = [(column[x.index], x.expression) for x in self.expressions if x.index in column]
+        for c, e in exprs:
+            v = np.clip(w[:, c], 0.0, 1.0)
+            w[:, c] = (v > 0.5) if e.binary else v
+        for kind, procedural in PROCEDURAL.items():
+            amount = np.zeros(len(w), w.dtype)
+            for c, e in exprs:
+                mode = dict(e.overrides).get(kind)
+                if mode == "block":
+                    amount += w[:, c] > 0
+                elif mode == "blend":
+                    amount += w[:, c]
+            if not amount.any():
+                continue
+            factor = np.maximum(0.0, 1.0 - amount)
+            for c, e in exprs:
+                if e.preset and e.name in procedural:
+                    w[:, c] = np.where(amount > 0, 0.0, w[:, c]) if e.binary else w[:, c] * factor
+        return w
 
 
 def match_names(weights: list[str], targets: list[str]) -> Match:
@@ -81,6 +147,55 @@ def match_names(weights: list[str], targets: list[str]) -> Match:
             unmatched.append(w)
     undriven = [t for j, t in enumerate(targets) if not mapping[:, j].any()]
     return Match(mapping, unmatched, undriven, duplicates)
+
+
+def match_face(weights: list[str], face: MorphFace) -> Match:
+    """Match capture weight names onto a face: by name (a VRM expression before a raw morph of its name), or through
+    ARKIT_TO_VRM for a VRM face that names few of the capture's table weights (see the module docstring)."""
+    m = match_names(weights, face.names)
+    if not face.expressions:
+        return m
+    mapping = m.mapping.copy()
+    is_expression = np.zeros(len(face.names), bool)
+    is_expression[[x.index for x in face.expressions]] = True
+    for i in np.flatnonzero((mapping[:, is_expression] > 0).any(axis=1)):
+        mapping[i, ~is_expression] = 0.0  # the expression, not the raw morph of the same name
+    table = {normalise(k): v for k, v in ARKIT_TO_VRM.items()}
+    presets = {x.expression.name: x.index for x in face.expressions if x.expression.preset}
+    rows, seen, repeated = {}, set(), set()
+    for i, w in enumerate(weights):
+        key = normalise(w)
+        if key in seen:
+            repeated.add(i)
+        elif key in table:
+            rows[i] = table[key]
+        seen.add(key)
+    named = sum(1 for i in rows if mapping[i].any())
+    route, notes = "names", []
+    if rows and presets and named < TABLE_ROUTE_NAMED * len(rows):
+        route = "vrm-table"
+        notes.append(f"the face has VRM expressions but names {named} of the capture's {len(rows)} ARKit weights "
+                     "that map to VRM presets: they drive its presets through facesvg's ARKit-to-VRM table "
+                     "(converter.blendshapes.ARKIT_TO_VRM).")
+        for i, pairs in rows.items():
+            row = np.zeros(len(face.names), np.float32)
+            for preset, factor in pairs:
+                if preset not in presets and preset in VRM_FALLBACK:
+                    preset, scale = VRM_FALLBACK[preset]
+                    factor *= scale
+                if preset in presets:
+                    row[presets[preset]] += factor
+            if row.any():  # else the weight keeps any target of its own name
+                mapping[i] = row
+    driven = mapping.any(axis=0)
+    moved = {j for x in face.expressions for j in x.bound}  # raw morphs an expression moves: reported through it
+    binary = [face.names[x.index] for x in face.expressions if x.expression.binary and driven[x.index]]
+    if binary:
+        notes.append(f"VRM expressions {', '.join(binary)} are binary (isBinary): on above a weight of 0.5, else off.")
+    matched = mapping.any(axis=1)
+    unmatched = [w for i, w in enumerate(weights) if not matched[i] and i not in repeated]
+    undriven = [t for j, t in enumerate(face.names) if not driven[j] and j not in moved]
+    return Match(mapping, unmatched, undriven, m.duplicates, route, tuple(notes), face.expressions)
 
 
 def rotations(ypr: np.ndarray) -> np.ndarray:
@@ -110,20 +225,26 @@ def eye_vertices(face: MorphFace) -> tuple[np.ndarray, np.ndarray] | None:
 
 def drive(face: MorphFace, track: WeightTrack, fps: float | None = None,
           progress: Progress = no_progress) -> FaceAnimation:
-    """The face animated by the track (resampled to fps when given); extras["weights"] says what matched and applied."""
-    if fps is not None and abs(fps - track.fps) > 1e-9:
-        track = track.sampled(fps)
+    """The face animated by the track (resampled to fps when given); extras["weights"] says what matched and applied.
+
+    Frame k of the animation is at k / fps: a track whose rows are off that grid (dropped rows, a recorder's
+    clock drifting) is resampled onto it at its own rate, so the animation lasts as long as the take."""
+    rate = track.fps if fps is None else fps
+    # Rows within half a frame of their grid slot are kept as they are: that is what nearest-row resampling
+    # would pick, and linear resampling would only blur them.
+    if abs(rate - track.fps) > 1e-9 or not track.is_regular(tol=0.5):
+        track = track.sampled(rate)
     t, v = track.n_frames, len(face.base)
     if t * v * 3 > MAX_OUTPUT_FLOATS:
         raise InputError(f"{track.n_frames} frames x {v} vertices is too much to convert; lower --fps or trim the "
                          "capture.")
-    m = match_names(track.names, face.names)
+    m = match_face(track.names, face)
     driven = np.flatnonzero(m.mapping.any(axis=0))
     if not len(driven):
         raise InputError(f"none of the {len(track.names)} capture weights ({', '.join(track.names[:3])}, ...) names a "
                          f"morph target of the face ({', '.join(face.names[:3])}, ...); rename the targets to ARKit "
                          "names.")
-    target_w = track.values @ m.mapping[:, driven]  # (T, Kd)
+    target_w = m.weights(track.values, driven)  # (T, Kd)
     deltas = face.deltas[driven].reshape(len(driven), -1)  # (Kd, V*3)
     head = track.head if track.head is not None and np.abs(track.head).max() > 0 else None
     eyes = eye_vertices(face)
@@ -167,7 +288,7 @@ def drive(face: MorphFace, track: WeightTrack, fps: float | None = None,
         "head_rotation_applied": int(head is not None),
         "eye_rotation_applied": int(apply_eyes),
     }
-    warnings = []
+    warnings = list(m.notes)
     if m.unmatched_weights:
         warnings.append(f"{len(m.unmatched_weights)} capture weights found no morph target: "
                         f"{', '.join(m.unmatched_weights)}.")
@@ -177,7 +298,8 @@ def drive(face: MorphFace, track: WeightTrack, fps: float | None = None,
         warnings.append(f"capture weights named like earlier ones were ignored: {', '.join(m.duplicates)}.")
     if has_eye_angles and not apply_eyes:
         warnings.append("the capture's eye rotations were not applied: the face has no eye parts on both sides.")
-    extras = {**face.extras, "weights": {"counts": weights_info, "warnings": warnings, "source": track.source,
+    extras = {**face.extras, "weights": {"counts": weights_info, "warnings": warnings, "route": m.route,
+                                         "source": track.source,
                                          "start_timecode": track.start_timecode}}
     return FaceAnimation(frames, face.faces, face.part_ids, face.parts, float(track.fps), face.name,
                          vertex_colors=face.vertex_colors, extras=extras)

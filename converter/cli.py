@@ -14,6 +14,7 @@ from converter.bundled import sample_path
 from converter.convert import convert
 from converter.encode import parallel
 from converter.errors import FacesvgError, InputError
+from converter.formats import captures
 from converter.options import ConversionOptions, Eta, OptionField, option_fields
 from converter.outputs import choices, output_kind
 from converter.userfiles import check_output, write_atomic
@@ -120,8 +121,24 @@ def hex_color(rgb: tuple[float, float, float]) -> str:
     return "#" + "".join(f"{int(round(min(max(float(c), 0.0), 1.0) * 255)):02x}" for c in rgb)
 
 
+def capture_info(path: str) -> dict | None:
+    """What `facesvg info` says about a weight capture (layout, frames, rate, names, angles), or None for a face."""
+    if captures.detect_file(path) is None:
+        return None  # a face, or a path formats.load explains (missing, a folder)
+    track = captures.read_capture(path)
+    return {"name": Path(path).stem, "kind": "capture", **captures.describe(track)}
+
+
 def cmd_info(args: argparse.Namespace) -> int:
-    """facesvg info INPUT."""
+    """facesvg info INPUT (a face or animation; a weight capture is described as one)."""
+    capture = capture_info(args.input)
+    if capture is not None:
+        if args.json:
+            print(json.dumps(capture, indent=2, sort_keys=True))
+        else:
+            for k, v in capture.items():
+                print(f"{k:>16}: {', '.join(v) if isinstance(v, list) else v}")
+        return 0
     anim = formats.load(args.input, cache=args.cache, animation=args.animation)
     counts: dict[str, int] = {}  # triangles per semantic part, over every part of that name
     for i, p in enumerate(anim.parts):
@@ -177,7 +194,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_conversion_options(p)
     p.set_defaults(func=cmd_convert)
 
-    p = sub.add_parser("info", help="describe an input animation")
+    p = sub.add_parser("info", help="describe an input animation, or a weight capture (its layout, frames, rate)")
     p.add_argument("input")
     p.add_argument("--cache", help="PC2 or MDD point cache for an OBJ input")
     p.add_argument("--animation", help="glTF animation to describe: NAME, INDEX or all (default: the first take)")

@@ -3,6 +3,13 @@
 A MorphFace is the rest mesh plus one delta per named target, in the scene's units. glTF targets are read by
 posing the file through the glTF loader itself (one frame per target at weight 1), so node transforms, several
 meshes sharing a target name, quantised or meshopt data all come out exactly as the loader draws them.
+
+A VRM avatar's expressions (converter/formats/gltf/vrm.py) are targets too, beside the raw morphs: each is posed
+as one frame with its binds' weights, so its delta is the sum of its binds' deltas times their weights (0.x weight
+/ 100, 1.0 weight as is). It takes its VRM name (1.0 preset names, 0.x presets renamed to them, custom names);
+where a raw morph already has that name, the expression shows as `vrm:<name>` (the weights stage still matches
+it by the plain name, and prefers it: converter/blendshapes.py). Which targets are expressions, binary or
+overriding, is in MorphFace.expressions; material binds move nothing and are reported in extras["warnings"].
 """
 
 from __future__ import annotations
@@ -22,6 +29,8 @@ import numpy as np
 from converter.animation import FaceAnimation, Part
 from converter.errors import InputError
 from converter.formats import gltf
+from converter.formats.gltf.names import target_names
+from converter.formats.gltf.vrm import Expression, read_expressions
 from converter.formats.ictfacekit import load_ict_head
 from converter.formats.obj import parse_obj, parse_obj_vertices
 from converter.formats.objseq import check_entries, material_colors, natural_key, read
@@ -32,6 +41,16 @@ from converter.userfiles import read_bytes
 NEUTRAL_NAMES = ("neutral", "base", "basis", "rest", "generic_neutral_mesh")
 MAX_TARGETS = 1024
 MAX_SHAPE_BYTES = 1 << 30  # one gunzipped shape OBJ
+
+
+@dataclass(frozen=True)
+class ExpressionTarget:
+    """A VRM expression that is one of a MorphFace's targets: its index there, the expression (name, binds, isBinary,
+    overrides) and the named raw targets its binds move."""
+
+    index: int
+    expression: Expression
+    bound: tuple[int, ...]
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,6 +66,7 @@ class MorphFace:
     name: str = "face"
     vertex_colors: np.ndarray | None = None
     extras: dict = field(default_factory=dict)
+    expressions: tuple[ExpressionTarget, ...] = ()  # VRM expressions among the targets (glTF faces only)
 
     def still(self, fps: float) -> FaceAnimation:
         """The rest mesh as a one-frame FaceAnimation (carries parts, colours and extras)."""
@@ -73,7 +93,9 @@ def load_morph_face(path: str | Path, progress: Progress = no_progress) -> Morph
 
 
 def from_gltf(data: bytes, base_dir: Path, name: str = "face") -> MorphFace:
-    """Named morph targets of every mesh (mesh.extras.targetNames), as world-space deltas of the rest pose."""
+    """Named morph targets of every mesh (names as gltf.names reads them), then the VRM expressions, if any, as
+    targets of their own (each the sum of its binds' targets times their weights), as world-space deltas of the
+    rest pose."""
     doc, bin_chunk = gltf.parse_container(data, name)
     names: list[str] = []
     slots: list[tuple[int, list[str]]] = []  # (node index, target name per target slot)
@@ -88,37 +110,64 @@ def from_gltf(data: bytes, base_dir: Path, name: str = "face") -> MorphFace:
         k = len((prims[0] if isinstance(prims[0], dict) else {}).get("targets") or [])
         if not k:
             continue
-        labels = (mesh.get("extras") or {}).get("targetNames") or []
-        labels = [str(n) for n in labels][:k] if isinstance(labels, list) else []
-        labels += [""] * (k - len(labels))
+        labels = target_names(mesh, k)
         slots.append((i, labels))
         names += [n for n in labels if n and n not in names]
-    if not names:
-        raise InputError(f"{name} has no named morph targets (mesh.extras.targetNames); export the shape keys "
-                         "with their names (Blender: glTF export, Shape Keys on).")
-    if len(names) > MAX_TARGETS:
-        raise InputError(f"{name} has {len(names)} morph target names, more than {MAX_TARGETS}.")
-    posed = _posing_document(doc, slots, names)
+    n_raw = len(names)
+    found, notes = read_expressions(doc)
+    animated = {node for node, _ in slots}
+    if not names and not any(e.binds for e in found):
+        raise InputError(f"{name} has no named morph targets (mesh.extras.targetNames) nor VRM expressions; export "
+                         "the shape keys with their names (Blender: glTF export, Shape Keys on).")
+    if len(names) + len(found) > MAX_TARGETS:
+        raise InputError(f"{name} has {len(names) + len(found)} morph targets and expressions, more than "
+                         f"{MAX_TARGETS}.")
+    poses: list[dict[int, dict[int, float]]] = []  # per target: node -> {slot: weight}
+    for label in names:
+        poses.append({node: {s: 1.0 for s, n in enumerate(labels) if n == label} for node, labels in slots})
+    labels_of = dict(slots)
+    expressions = []
+    for e in found:
+        weights: dict[int, dict[int, float]] = {}
+        for node, slot, w in e.binds:
+            if node in animated:
+                weights.setdefault(node, {})
+                weights[node][slot] = weights[node].get(slot, 0.0) + w
+        bound = sorted({names.index(labels_of[node][slot]) for node, slot, _ in e.binds
+                        if node in animated and labels_of[node][slot]})
+        shown = e.name if e.name not in names else f"vrm:{e.name}"  # a raw morph keeps its own name
+        while shown in names:
+            shown += "_"
+        expressions.append(ExpressionTarget(len(names), e, tuple(bound)))
+        names.append(shown)
+        poses.append(weights)
+    posed = _posing_document(doc, slots, poses)
     anim = gltf.load_gltf(_repack(posed, bin_chunk, data[:4] == b"glTF"), base_dir=base_dir, fps=1.0, name=name)
     if anim.n_frames != len(names) + 1:
         raise InputError(f"{name}: posing the morph targets gave {anim.n_frames} frames, expected {len(names) + 1}.")
     base = anim.frames[0]
     deltas = (anim.frames[1:] - base[None]).astype(np.float32)
     extras = {k: v for k, v in anim.extras.items() if k not in ("animation", "animated_nodes", "morph_animated_nodes")}
+    if expressions:
+        extras["morph_targets"] = names[:n_raw]
+        extras["vrm_expressions"] = [x.expression.name for x in expressions]
+    if notes:
+        extras["warnings"] = [*extras.get("warnings", ()), *notes]
     return MorphFace(np.array(base), deltas, names, anim.faces, anim.part_ids, anim.parts, name,
-                     anim.vertex_colors, extras)
+                     anim.vertex_colors, extras, tuple(expressions))
 
 
-def _posing_document(doc: dict, slots: list[tuple[int, list[str]]], names: list[str]) -> dict:
-    """A copy of doc whose only animation shows the rest pose at t=0 and target name j at weight 1 at t=j+1."""
-    n = len(names) + 1
+def _posing_document(doc: dict, slots: list[tuple[int, list[str]]], poses: list[dict[int, dict[int, float]]]) -> dict:
+    """A copy of doc whose only animation shows the rest pose at t=0 and pose j (node -> {target slot: weight})
+    at t=j+1, over the morph targets of the slots' nodes."""
+    n = len(poses) + 1
     blobs = [np.arange(n, dtype="<f4").tobytes()]
     samplers, channels = [], []
-    for _node, labels in slots:
+    for node, labels in slots:
         w = np.zeros((n, len(labels)), "<f4")
-        for slot, label in enumerate(labels):
-            if label:
-                w[names.index(label) + 1, slot] = 1.0
+        for j, pose in enumerate(poses):
+            for slot, value in pose.get(node, {}).items():
+                w[j + 1, slot] = value
         blobs.append(w.tobytes())
     out = dict(doc)
     buffers = list(doc.get("buffers") or [])

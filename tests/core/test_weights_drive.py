@@ -180,7 +180,7 @@ def test_head_yaw_rotates_the_face_rigidly_about_the_centre(tmp_path, sample_pat
     expected = (face.base + track.values[k, 0] * jaw - pivot) @ r.T + pivot
     np.testing.assert_allclose(anim.frames[k], expected, atol=1e-4)
     yaw = track.head[k, 0]
-    assert abs(yaw - 0.1 * np.sin(k / 50) * np.pi / 2) < 1e-5
+    assert abs(yaw - 0.1 * np.sin(k / 50) * np.pi) < 1e-5  # Live Link Face angles: 1 unit = 180 degrees
 
 
 @pytest.mark.slow

@@ -26,9 +26,9 @@ def test_live_link_face_csv(shared_data):
     # times follow the timecode: 00:32:09:07.867 -> 00:32:09:08.868 is (1 + 0.001) / 60 s
     assert track.times[1] == pytest.approx(1.001 / 60, abs=1e-9)
     assert track.times[-1] == pytest.approx(np.sum(np.diff(track.times)))
-    # angles: normalised -1..1 in the file, radians (x pi/2) in the track
+    # angles: -1..1 = -180..180 degrees in the file (Epic's ToBlendShapeMap), radians (x pi) in the track
     eye = header.index("LeftEyeYaw")
-    np.testing.assert_allclose(track.eye_left[:, 0], [float(r[eye]) * np.pi / 2 for r in body], rtol=1e-6)
+    np.testing.assert_allclose(track.eye_left[:, 0], [float(r[eye]) * np.pi for r in body], rtol=1e-6)
     assert track.head is not None and not track.head.any()
 
 
@@ -36,7 +36,8 @@ def test_timecode_rate_from_the_frame_field():
     head = "Timecode,BlendShapeCount,JawOpen\n"
     rows = "".join(f"00:00:0{s}:{f:02d}.000,1,0.{f:02d}\n" for s in (1, 2) for f in range(0, 30, 2))
     track = parse_weights((head + rows).encode(), "t.csv")
-    assert track.fps == 30.0 and track.times[1] == pytest.approx(2 / 30)
+    # 30 fps timecodes, a row every second frame: the take is 15 fps, its times as written
+    assert track.fps == 15.0 and track.times[1] == pytest.approx(2 / 30)
 
 
 def test_audio2face_json():
@@ -76,7 +77,7 @@ def test_frame_list_layouts():
     ("Timecode,BlendShapeCount,JawOpen\n", ["x.csv", "no frames"]),
     ('{"asset": {"version": "2.0"}}', ["x.csv", "not a weight layout"]),
     ('{"facsNames": ["a"], "weightMat": [[0.1], ["x"]]}', ["x.csv", "weightMat", "not numbers"]),
-    ('{"facsNames": ["a"], "weightMat": [[0.1, 0.2]]}', ["x.csv", "one weight per name"]),
+    ('{"facsNames": ["a"], "weightMat": [[0.1, 0.2]]}', ["x.csv", "weightMat", "expected 1"]),
     ('[{"time": 0, "blendshapes": {"jawOpen": null}}]', ["x.csv", "jawOpen", "not a finite number"]),
     ('[{"time": 0}]', ["x.csv", "no blendshapes"]),
     ("{not json", ["x.csv", "not valid JSON"]),

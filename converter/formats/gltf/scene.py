@@ -23,9 +23,11 @@ from converter.errors import InputError
 from converter.formats.gltf.accessors import Accessors
 from converter.formats.gltf.clips import Tracks, choose, clip_label, summaries
 from converter.formats.gltf.container import parse_container
+from converter.formats.gltf.names import target_names
 from converter.formats.gltf.sampling import keyframe_rate, sample, trs_matrices
 from converter.formats.gltf.skin import check_joint_indices, influences, joint_matrices, skin_positions
 from converter.formats.gltf.textures import decode_image, sample_texture
+from converter.formats.gltf.vrm import read_expressions
 from converter.formats.parts import part_name
 from converter.lighting import linear_to_srgb
 
@@ -116,8 +118,8 @@ class _Document(Accessors):
         for node_index, node, mesh, prims in instances:
             k = prims[0]["deltas"].shape[0]
             morph_count += k
-            names = ((mesh.get("extras") or {}).get("targetNames") or []) if k else []
-            morph_names += [str(n) for n in names if str(n) not in morph_names]
+            names = target_names(mesh, k) if k else []
+            morph_names += [n for n in names if n and n not in morph_names]
             for j, p in enumerate(prims):
                 faces.append(p["faces"] + offset)
                 part, own = self.part(node_index, node, mesh, j, p)
@@ -161,7 +163,7 @@ class _Document(Accessors):
         for node, parent in order:
             mesh_index = self.item("nodes", node).get("mesh")
             mesh = self.item("meshes", mesh_index) if mesh_index is not None else {}
-            targets = tuple(str(n) for n in (mesh.get("extras") or {}).get("targetNames") or ())
+            targets = tuple(n for n in target_names(mesh) if n)
             tree.append((self.node_label(node), position.get(parent, -1), str(mesh.get("name") or ""), targets))
         counts = [sum(len(p["positions"]) for p in prims) for *_, prims in instances]
         of_vertex = np.repeat(np.array([position[i] for i, *_ in instances], np.int32), counts)
@@ -177,9 +179,14 @@ class _Document(Accessors):
                 joint_of_vertex.append(where[np.clip(strongest, 0, len(joint_nodes))])
         extensions = self.doc.get("extensions") or {}
         vrm = "0.x" if "VRM" in extensions else "1.0" if "VRMC_vrm" in extensions else None
+        # what a weight capture can drive (`facesvg info` prints lists): expressions, and those with material binds
+        expressions = read_expressions(self.doc)[0] if vrm else []
+        shown = {"vrm_expressions": [e.name for e in expressions]} if expressions else {}
+        if any(e.material_binds for e in expressions):
+            shown["vrm_material_binds_not_drawn"] = [e.name for e in expressions if e.material_binds]
         # tuples and arrays: `info` prints only plain lists and dicts
         return {"node_tree": tuple(tree), "node_of_vertex": of_vertex, "joint_of_vertex": np.concatenate(
-            joint_of_vertex), **({"vrm": vrm} if vrm else {})}
+            joint_of_vertex), **({"vrm": vrm} if vrm else {}), **shown}
 
     def pose(self, order: list[tuple[int, int]], instances: list, n_vertices: int, tracks: Tracks,
              t: np.ndarray) -> np.ndarray:
