@@ -16,7 +16,7 @@ function setupDrop() {
     e.preventDefault();
     if (e.dataTransfer && e.dataTransfer.files.length) {
       input.files = e.dataTransfer.files;
-      show();
+      input.dispatchEvent(new Event("change", { bubbles: true })); // the name and the size check, as on choosing
       document.getElementById("convert").focus();
     }
   });
@@ -24,6 +24,8 @@ function setupDrop() {
   window.addEventListener("dragover", (e) => e.preventDefault());
   window.addEventListener("drop", (e) => e.preventDefault());
 }
+
+const MAX_POLL_FAILURES = 5; // about 9 s of backing off
 
 function setupProgress() {
   const box = document.querySelector("[data-status-url]");
@@ -34,11 +36,22 @@ function setupProgress() {
   const percent = document.getElementById("percent");
   const state = document.getElementById("job-state");
   let delay = 300;
+  let failures = 0;
+  function lostTouch() {
+    state.textContent = "unknown";
+    state.className = "state state-error";
+    stage.textContent = "no readable answer from the server";
+    const note = document.getElementById("poll-error");
+    if (note) note.hidden = false;
+  }
   async function poll() {
     try {
       const r = await fetch(url, { headers: { Accept: "application/json" }, cache: "no-store" });
       if (r.status === 404) { stage.textContent = "this job was deleted"; return; }
-      const job = await r.json();
+      if (!r.ok) throw new Error(`HTTP ${r.status}`);
+      const job = await r.json(); // throws on an answer that is not JSON
+      if (!job || typeof job.state !== "string") throw new Error("not a job");
+      failures = 0;
       bar.value = job.percent;
       percent.textContent = job.percent;
       stage.textContent = job.stage;
@@ -52,7 +65,11 @@ function setupProgress() {
       }
       delay = 400;
     } catch (err) {
-      delay = Math.min(delay * 2, 5000); // server busy or restarting: back off, keep trying
+      // Server busy or restarting: back off and try again; after several unreadable answers in a row, say so
+      // instead of showing the last progress for ever.
+      failures += 1;
+      if (failures >= MAX_POLL_FAILURES) { lostTouch(); return; }
+      delay = Math.min(delay * 2, 5000);
     }
     setTimeout(poll, delay);
   }
@@ -81,9 +98,47 @@ function setField(form, name, value) {
   });
 }
 
+// A size as the server words it: "1.5 MB", "64 KB".
+function sizeText(n) {
+  const mb = n / 1048576;
+  if (n >= 1048576) return Number.isInteger(mb) || mb >= 100 ? `${Math.round(mb)} MB` : `${mb.toFixed(1)} MB`;
+  return n >= 1024 ? `${Math.max(Math.round(n / 1024), 1)} KB` : `${n} bytes`;
+}
+
+// The server refuses a body over its limit (413); say so before sending, naming the file, with the same limit.
+function setupSizeCheck(form) {
+  const limit = parseInt(form.dataset.maxBytes, 10);
+  const box = document.getElementById("size-error");
+  if (!limit || !box) return;
+  const limitText = form.dataset.maxText || sizeText(limit);
+  const advice = "Reduce it (fewer frames, a .glb with meshopt compression) or ask the administrator to raise "
+    + "the limit.";
+  function check() {
+    const files = [];
+    form.querySelectorAll('input[type="file"]').forEach((input) => files.push(...input.files));
+    const big = files.filter((f) => f.size > limit);
+    const total = files.reduce((sum, f) => sum + f.size, 0);
+    let message = "";
+    if (big.length) {
+      message = big.map((f) => `“${f.name}” is ${sizeText(f.size)}, over the ${limitText} upload limit.`).join(" ")
+        + " " + advice;
+    } else if (total > limit) {
+      message = `The chosen files are ${sizeText(total)} together, over the ${limitText} upload limit. ${advice}`;
+    }
+    box.textContent = message;
+    box.hidden = !message;
+    return !message;
+  }
+  form.addEventListener("change", (e) => { if (e.target.type === "file") check(); });
+  form.addEventListener("submit", (e) => {
+    if (!check()) { e.preventDefault(); box.scrollIntoView({ block: "center" }); }
+  });
+}
+
 function setupForm() {
   const form = document.getElementById("upload-form");
   if (!form) return;
+  setupSizeCheck(form);
   document.querySelectorAll("[data-preset]").forEach((button) => {
     button.addEventListener("click", () => {
       const values = JSON.parse(button.dataset.preset);

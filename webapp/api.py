@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import io
+import logging
+
 from flask import Blueprint, abort, current_app, g, jsonify, request, send_file, url_for
 
 from converter.errors import InputError
 from converter.outputs import OUTPUTS, output_files
+from webapp import strictjson
 from webapp.eta import standing
-from webapp.jobstore import DONE, Job
+from webapp.jobstore import DONE, Job, damaged
 from webapp.messages import user_words
 from webapp.openapi import openapi_document
 from webapp.security import may_see, self_contained_csp
@@ -15,6 +19,7 @@ from webapp.storage import is_job_id, result_files
 from webapp.submit import create_job, download_stem
 
 api = Blueprint("api", __name__)
+log = logging.getLogger("facesvg.webapp")
 REPORT_SUFFIX = ".report.json"
 
 
@@ -29,6 +34,15 @@ def find_job(job_id: str) -> Job:
     if job is None or not may_see(job):
         abort(404, description=f"no job {job_id!r}; it may have been deleted or cleaned up.")
     return job
+
+
+def public_job(job: Job) -> dict:
+    """job_json, or the job shown as damaged (failed) when its stored record cannot be presented."""
+    try:
+        return job_json(job)
+    except Exception as exc:  # a record the store could parse but that makes no sense: never break the answer
+        log.warning("job %s: cannot present its record: %r", job.id, exc)
+        return job_json(damaged(job, "its result could not be read"))
 
 
 def job_json(job: Job) -> dict:
@@ -82,7 +96,7 @@ def list_jobs():
         limit = min(max(int(request.args.get("limit", 50)), 1), 500)
     except ValueError:
         abort(400, description="limit must be a whole number between 1 and 500.")
-    return jsonify(jobs=[job_json(j) for j in visible_jobs(limit)])
+    return jsonify(jobs=[public_job(j) for j in visible_jobs(limit)])
 
 
 def visible_jobs(limit: int) -> list[Job]:
@@ -101,7 +115,7 @@ def post_job():
                          client=getattr(g, "client", ""))
     except InputError as exc:
         return jsonify(error=user_words(str(exc)), status=400), 400
-    response = jsonify(job_json(queue().get(job.id) or job))
+    response = jsonify(public_job(queue().get(job.id) or job))
     response.status_code = 202
     response.headers["Location"] = url_for("api.get_job", job_id=job.id)
     return response
@@ -110,7 +124,7 @@ def post_job():
 @api.get("/jobs/<job_id>")
 def get_job(job_id: str):
     """State, stage, progress, error and links of a job."""
-    return jsonify(job_json(find_job(job_id)))
+    return jsonify(public_job(find_job(job_id)))
 
 
 @api.delete("/jobs/<job_id>")
@@ -170,7 +184,8 @@ def _send(job: Job, kind: str):
     out = output_files().get(kind)
     suffix = out.suffix if out else REPORT_SUFFIX
     download = (out is not None and out.attachment) or request.args.get("download") in ("1", "true")
-    response = send_file(path, mimetype=media, as_attachment=download,
+    source = io.BytesIO(strict_report(path)) if kind == "report" else path
+    response = send_file(source, mimetype=media, as_attachment=download,
                          download_name=download_stem(job) + suffix, max_age=0)
     if kind == "svg":  # generated SVG shown inline: no scripts, no external loads
         response.headers["Content-Security-Policy"] = ("default-src 'none'; style-src 'unsafe-inline'; img-src data:; "
@@ -179,3 +194,12 @@ def _send(job: Job, kind: str):
         response.headers["Content-Security-Policy"] = self_contained_csp(path)
     return response
 
+
+def strict_report(path) -> bytes:
+    """A stored report as strict JSON: a non-finite figure (reports stored before they were cleaned) as null."""
+    try:
+        report = strictjson.loads(path.read_bytes())
+    except (OSError, ValueError, RecursionError):
+        abort(500, description="this job's stored report is damaged and cannot be served; delete the job and "
+                               "convert the file again.")
+    return strictjson.dumps(report, indent=1, sort_keys=True).encode()

@@ -19,6 +19,7 @@ from webapp.api import api
 from webapp.jobs import make_queue
 from webapp.lease import InstanceLock
 from webapp.pages import pages
+from webapp.strictjson import StrictJSONProvider
 
 ROOT = Path(__file__).resolve().parents[1]
 csrf = CSRFProtect()
@@ -39,6 +40,7 @@ DEFAULTS = {
     "FACESVG_RATE_LIMIT": 30,  # submissions per minute per client (API key, session or address; 0: off)
     "FACESVG_API_KEYS": "",  # comma-separated; when set the API needs a key and jobs are scoped to it
     "FACESVG_SAMPLE": str(sample_path()),
+    "FACESVG_DRAIN_MB": None,  # a refused upload is still read up to this far past the limit (None: the limit again)
     "WTF_CSRF_TIME_LIMIT": None,  # tokens live as long as the session
 }
 ENV_KEYS = {  # FACESVG_* environment variables override defaults; explicit config overrides both
@@ -46,6 +48,7 @@ ENV_KEYS = {  # FACESVG_* environment variables override defaults; explicit conf
     "FACESVG_CLEANUP_INTERVAL": float, "FACESVG_MAX_UNZIPPED_MB": int, "FACESVG_PREVIEW_FRAMES": int,
     "FACESVG_STORAGE": str, "FACESVG_SAMPLE": str, "FACESVG_JOB_TIMEOUT": int, "FACESVG_LEASE_SECONDS": float,
     "FACESVG_RETRIES": int, "FACESVG_QUEUE_CAP": int, "FACESVG_RATE_LIMIT": int, "FACESVG_API_KEYS": str,
+    "FACESVG_DRAIN_MB": float,
 }
 
 
@@ -60,6 +63,7 @@ def create_app(config: dict | None = None) -> Flask:
         instance_path=(config or {}).get("INSTANCE_PATH") or os.environ.get("FACESVG_INSTANCE")
         or (str(ROOT / "instance") if (ROOT / "pyproject.toml").is_file() else None),
     )
+    app.json = StrictJSONProvider(app)  # before the Jinja environment exists: its tojson filter uses it too
     app.config.update(DEFAULTS)
     for key, cast in ENV_KEYS.items():
         if os.environ.get(key):
@@ -150,9 +154,8 @@ def _register_errors(app: Flask) -> None:
 
     @app.errorhandler(413)
     def too_large(exc):
-        limit = app.config["MAX_CONTENT_LENGTH"] // (1024 * 1024)
-        message = f"The upload is larger than the {limit} MB limit. Reduce the file (fewer frames, a .glb with " \
-                  "meshopt compression) or ask the administrator to raise FACESVG_MAX_UPLOAD_MB."
+        message = limits.too_large_message(app.config)
+        limits.drain_refused_body(request.environ, app.config)  # so a client still sending reads this answer
         if wants_json():
             return jsonify(error=message, status=413), 413
         return render_template("error.html", code=413, title="File too large", message=message), 413

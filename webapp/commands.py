@@ -13,9 +13,9 @@ from converter.errors import InputError
 from webapp import runner  # noqa: F401 - imported so forked RQ work horses start warm
 from webapp.app import create_app
 from webapp.lease import InstanceBusy
+from webapp.limits import server_body_limit
 from webapp.warmup import warm_converter
 
-FORM_SLACK = 1 << 20  # room for the option fields and multipart framing beside the largest upload
 RQ_MAINTENANCE_SECONDS = 30  # how often an RQ worker cleans up jobs abandoned by a dead worker (RQ: 600)
 
 
@@ -35,8 +35,9 @@ def cmd_serve(args: argparse.Namespace) -> int:
     except InstanceBusy as exc:
         print(f"facesvg serve: {exc}", file=sys.stderr, flush=True)
         return 2
-    # waitress refuses a larger body as it reads it (a declared Content-Length at once, a chunked one on the way)
-    body_limit = int(app.config["MAX_CONTENT_LENGTH"]) + FORM_SLACK
+    # waitress refuses a larger body as it reads it (a declared Content-Length at once, a chunked one on the way);
+    # below that it reads the body whole, so the app's 413 (JSON on the API) reaches a client that sends it all
+    body_limit = server_body_limit(app.config)
     print(f"facesvg web UI on http://{args.host}:{args.port} ({app.extensions['facesvg_queue'].name} queue)",
           flush=True)
     signal.signal(signal.SIGTERM, _exit)

@@ -3,14 +3,23 @@
 from __future__ import annotations
 
 import json
+import logging
+import math
 import sqlite3
 import threading
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
+from typing import Any
+
+from webapp import strictjson
+
+log = logging.getLogger("facesvg.webapp")
 
 QUEUED, RUNNING, DONE, FAILED, CANCELLING, CANCELLED = "queued", "running", "done", "failed", "cancelling", "cancelled"
 FINISHED = (DONE, FAILED, CANCELLED)
+STATES = (QUEUED, RUNNING, DONE, FAILED, CANCELLING, CANCELLED)
+DAMAGED = "damaged"  # the stage shown for a record that could not be read back (shown as failed)
 
 
 @dataclass
@@ -44,6 +53,102 @@ class Job:
 
 COLUMNS = tuple(f.name for f in fields(Job))
 JSON_COLUMNS = ("options", "files", "result", "progress_origin")
+TEXT_COLUMNS = ("id", "state", "stage", "message", "filename", "kind", "owner", "client")
+NUMBER_COLUMNS = {"progress": 0.0, "created": 0.0, "started": None, "finished": None, "lease": 0.0}
+
+
+def encode_json(value: Any) -> str:
+    """A JSON column as stored: strict JSON, every non-finite number written as null."""
+    return strictjson.dumps(value)
+
+
+def damaged(job: Job, why: str) -> Job:
+    """The view of a job whose stored record (or result) cannot be used: failed, with what to do."""
+    return replace(job, state=FAILED, stage=DAMAGED, progress=0.0, result={},
+                   message=f"the stored record of this job is damaged ({why}); delete the job and convert the file "
+                           "again.")
+
+
+def is_damaged(job: Job) -> bool:
+    """True for the view made by damaged()."""
+    return job.state == FAILED and job.stage == DAMAGED
+
+
+def job_from_record(raw: dict[str, Any], job_id: str) -> Job:
+    """A Job from stored column values (JSON columns still as text); a garbled record reads as a damaged job.
+
+    Non-finite numbers (records written before the store refused them) read as None; one bad record never
+    raises, so it cannot break a list of jobs or another job's page.
+    """
+    data: dict[str, Any] = {"id": job_id}
+    problems = []
+    for name in COLUMNS:
+        value = raw.get(name)
+        if name in JSON_COLUMNS:
+            try:
+                value = strictjson.loads(value) if value else {}
+            except (ValueError, TypeError, RecursionError):
+                problems.append(f"{name} is not JSON")
+                value = {}
+            if not isinstance(value, dict):
+                problems.append(f"{name} is not an object")
+                value = {}
+        elif name in TEXT_COLUMNS:
+            if value is None:
+                value = job_id if name == "id" else ""
+            elif not isinstance(value, str):
+                problems.append(f"{name} is not text")
+                value = str(value)
+        elif name in NUMBER_COLUMNS:
+            value = _number(value, NUMBER_COLUMNS[name], problems, name)
+        elif name == "attempts":
+            number = _number(value, 0, problems, name)
+            value = int(number) if number is not None else 0
+        data[name] = value
+    if data["state"] not in STATES:
+        problems.append(f"unknown state {data['state'][:20]!r}")
+        data["state"] = FAILED
+    if data["state"] == DONE:
+        problems += result_problems(data["result"])
+    origin = data["progress_origin"]
+    if origin and not all(isinstance(origin.get(k), (int, float)) for k in ("time", "progress")):
+        data["progress_origin"] = {}  # only the ETA reads it: it falls back to the elapsed time
+    job = Job(**data)
+    if problems:
+        log.warning("job %s: damaged record: %s", job_id, "; ".join(problems))
+        return damaged(job, "; ".join(problems))
+    return job
+
+
+def result_problems(result: dict) -> list[str]:
+    """What makes a finished job's result summary unusable by the pages and the API (empty when it is fine)."""
+    problems = []
+    frames = result.get("preview_frames", [])
+    if not isinstance(frames, list) or not all(isinstance(k, int) and not isinstance(k, bool) for k in frames):
+        problems.append("result.preview_frames is not a list of frames")
+    for key in ("frames", "still"):
+        if result.get(key) is not None and (not isinstance(result[key], int) or isinstance(result[key], bool)):
+            problems.append(f"result.{key} is not a whole number")
+    for key in ("fps", "duration", "size"):
+        if result.get(key) is not None and (not isinstance(result[key], (int, float)) or isinstance(result[key], bool)):
+            problems.append(f"result.{key} is not a number")
+    for key in ("outputs", "report"):
+        if not isinstance(result.get(key, {}), dict):
+            problems.append(f"result.{key} is not an object")
+    report = result.get("report")
+    if isinstance(report, dict):
+        problems += [f"result.report.{key} is not an object" for key in ("counts", "figures", "sizes")
+                     if not isinstance(report.get(key, {}), dict)]
+    return problems
+
+
+def _number(value: Any, default: float | None, problems: list[str], name: str) -> float | None:
+    if value is None:
+        return default
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        problems.append(f"{name} is not a number")
+        return default
+    return float(value) if math.isfinite(value) else default
 
 
 class JobStore:
@@ -136,6 +241,7 @@ class SQLiteStore(JobStore):
             conn.execute("PRAGMA journal_mode=WAL")
             conn.execute("PRAGMA synchronous=NORMAL")
             conn.row_factory = sqlite3.Row
+            conn.text_factory = _lenient_text  # one row with broken text must not make a whole list unreadable
             self._local.conn = conn
             with self._all_lock:
                 self._all.append(conn)
@@ -143,15 +249,15 @@ class SQLiteStore(JobStore):
 
     @staticmethod
     def _encode(key: str, value):
-        return json.dumps(value) if key in JSON_COLUMNS else value
+        if key in JSON_COLUMNS:
+            return encode_json(value)
+        if isinstance(value, float) and not math.isfinite(value):
+            return None
+        return value
 
     @staticmethod
     def _job(row: sqlite3.Row) -> Job:
-        data = {k: row[k] for k in COLUMNS}
-        for k in JSON_COLUMNS:
-            data[k] = json.loads(data[k] or "{}")
-        data["owner"], data["lease"], data["client"] = data["owner"] or "", data["lease"] or 0.0, data["client"] or ""
-        return Job(**data)
+        return job_from_record({k: row[k] for k in row.keys()}, str(row["id"]))
 
     def add(self, job: Job) -> None:
         data = job.to_json()
@@ -211,6 +317,10 @@ class SQLiteStore(JobStore):
         self._local = threading.local()
 
 
+def _lenient_text(data: bytes) -> str:
+    return data.decode("utf-8", errors="replace")
+
+
 # Compare-and-set on a hash field: KEYS[1] = job hash; ARGV = required owner ('' = any), n, n allowed states,
 # then field/value pairs (values JSON-encoded, as stored).
 _TRANSITION_LUA = """
@@ -248,7 +358,7 @@ class RedisStore(JobStore):
         return f"{self.prefix}:jobs"
 
     def add(self, job: Job) -> None:
-        data = {k: json.dumps(v) for k, v in job.to_json().items()}
+        data = {k: encode_json(v) for k, v in job.to_json().items()}
         pipe = self.redis.pipeline()
         pipe.hset(self._key(job.id), mapping=data)
         pipe.zadd(self._index, {job.id: job.created})
@@ -256,19 +366,35 @@ class RedisStore(JobStore):
 
     def get(self, job_id: str) -> Job | None:
         raw = self.redis.hgetall(self._key(job_id))
-        if not raw:
-            return None
-        return Job(**{k.decode(): json.loads(v) for k, v in raw.items() if k.decode() in COLUMNS})
+        return self._job(raw, job_id) if raw else None
+
+    @staticmethod
+    def _job(raw: dict, job_id: str) -> Job:
+        """A Job from a hash of JSON-encoded fields (every field but the JSON columns decoded here)."""
+        values: dict[str, Any] = {}
+        bad = []
+        for key, value in raw.items():
+            name = key.decode("utf-8", errors="replace")
+            if name not in COLUMNS:
+                continue
+            text = value.decode("utf-8", errors="replace")
+            if name in JSON_COLUMNS:
+                values[name] = text
+                continue
+            try:
+                values[name] = strictjson.loads(text)
+            except (ValueError, RecursionError):
+                bad.append(name)
+                values[name] = None
+        job = job_from_record(values, job_id)
+        return damaged(job, ", ".join(bad) + " not JSON") if bad and not is_damaged(job) else job
 
     def _many(self, ids) -> list[Job]:
+        names = [i.decode() if isinstance(i, bytes) else i for i in ids]
         pipe = self.redis.pipeline()
-        for i in ids:
-            pipe.hgetall(self._key(i.decode() if isinstance(i, bytes) else i))
-        out = []
-        for raw in pipe.execute():
-            if raw:
-                out.append(Job(**{k.decode(): json.loads(v) for k, v in raw.items() if k.decode() in COLUMNS}))
-        return out
+        for i in names:
+            pipe.hgetall(self._key(i))
+        return [self._job(raw, i) for i, raw in zip(names, pipe.execute()) if raw]
 
     def recent(self, limit: int = 50) -> list[Job]:
         return self._many(self.redis.zrevrange(self._index, 0, int(limit) - 1))
@@ -279,7 +405,7 @@ class RedisStore(JobStore):
             raise KeyError(f"unknown job fields {sorted(bad)}")
         args = ["" if holder is None else json.dumps(holder), len(from_states), *(json.dumps(s) for s in from_states)]
         for k, v in changes.items():
-            args += [k, json.dumps(v)]
+            args += [k, encode_json(v)]
         return bool(self._transition(keys=[self._key(job_id)], args=args))
 
     def remove(self, job_id: str) -> None:

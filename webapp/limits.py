@@ -1,8 +1,15 @@
 """Limits checked before any work: per-client submission rate, queue cap, and options that make sense.
 
-Both refusals carry Retry-After. The body size limit is enforced by the WSGI server while it reads
-(waitress `max_request_body_size`) and by Werkzeug's MAX_CONTENT_LENGTH, which refuses a declared length up
-front and stops a chunked body once it passes the limit.
+Both refusals carry Retry-After. The body size limit (MAX_CONTENT_LENGTH, FACESVG_MAX_UPLOAD_MB) is enforced by
+Werkzeug, which refuses a declared length up front and stops a chunked body once it passes the limit, and by the
+WSGI server while it reads (waitress `max_request_body_size`, set to server_body_limit).
+
+A refused body is still read, and thrown away, up to FACESVG_DRAIN_MB past the limit (by default as much again
+as the limit): a client that sends its whole body before reading the answer (Python's urllib, many scripts)
+then gets the 413 and its JSON message. A server that stops reading and closes the socket while the client
+still sends makes the kernel reset the connection, and the client sees "connection reset" instead. Above the
+drain bound a declared length is refused as soon as the headers arrive (waitress answers its own plain 413 and
+closes): such a client may see the reset; a browser never gets there, the upload form checks sizes first.
 """
 
 from __future__ import annotations
@@ -17,6 +24,71 @@ from flask import current_app, g, jsonify, render_template, request
 from converter.errors import InputError
 
 SUBMIT_ENDPOINTS = ("api.post_job", "pages.submit")
+FORM_SLACK = 1 << 20  # room for the option fields and multipart framing beside the largest upload
+DRAIN_CHUNK = 1 << 16
+
+
+def upload_limit(config) -> int:
+    """The largest request body the app takes, in bytes (MAX_CONTENT_LENGTH; the upload form checks against it)."""
+    return int(config["MAX_CONTENT_LENGTH"])
+
+
+def drain_limit(config) -> int:
+    """Bytes past the upload limit still read and discarded to answer 413 (FACESVG_DRAIN_MB; default the limit)."""
+    raw = config.get("FACESVG_DRAIN_MB")
+    if raw is None or raw == "":
+        return upload_limit(config)
+    return max(int(float(raw) * (1 << 20)), 0)
+
+
+def server_body_limit(config) -> int:
+    """The WSGI server's own body limit: past it the server refuses without reading (waitress)."""
+    return upload_limit(config) + FORM_SLACK + drain_limit(config)
+
+
+def size_text(n: int) -> str:
+    """A byte count as the form and messages show it: '100 MB', '1.5 MB', '64 KB'."""
+    if n >= 1 << 20:
+        mb = n / (1 << 20)
+        return f"{mb:.0f} MB" if mb.is_integer() or mb >= 100 else f"{mb:.1f} MB"
+    return f"{max(n / 1024, 1):.0f} KB" if n >= 1024 else f"{n} bytes"
+
+
+def too_large_message(config) -> str:
+    """What a 413 says: the limit and what to do."""
+    return (f"The upload is larger than the {size_text(upload_limit(config))} limit; reduce the file (fewer frames, a "
+            ".glb with meshopt compression) or ask the administrator to raise FACESVG_MAX_UPLOAD_MB.")
+
+
+def drain_refused_body(environ: dict, config) -> int:
+    """Read and discard a refused request's body when it ends within the drain bound; bytes read.
+
+    Only then: a longer declared body is left unread (reading it all would cost as much as taking it).
+    """
+    stream = environ.get("wsgi.input")
+    if stream is None:
+        return 0
+    bound = server_body_limit(config)
+    try:
+        declared = int(environ.get("CONTENT_LENGTH") or -1)
+    except ValueError:
+        return 0
+    if declared < 0 and not environ.get("wsgi.input_terminated"):
+        return 0  # no length and no end marker: reading could wait for ever
+    if declared > bound:
+        return 0
+    left = declared if declared >= 0 else bound
+    total = 0
+    try:
+        while left > 0:
+            data = stream.read(min(DRAIN_CHUNK, left))
+            if not data:
+                break
+            total += len(data)
+            left -= len(data)
+    except (OSError, ValueError):  # the client gave up; nothing left to answer
+        pass
+    return total
 
 
 class RateLimiter:

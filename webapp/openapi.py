@@ -48,6 +48,12 @@ def _job_response(description: str) -> dict:
             "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Job"}}}}
 
 
+TOO_LARGE = ("the request body is larger than the server's upload limit (FACESVG_MAX_UPLOAD_MB, 100 MB unless set); "
+             "the error names the limit. A body up to as much again over it (FACESVG_DRAIN_MB) is still read and "
+             "discarded so a client that sends it whole before reading gets this answer; a longer declared body is "
+             "refused as soon as its headers arrive, and such a client may see the connection closed instead")
+
+
 JOB_ID = {"name": "job_id", "in": "path", "required": True, "schema": {"type": "string", "pattern": "^[0-9a-f]{32}$"}}
 
 
@@ -85,7 +91,7 @@ def openapi_document() -> dict:
                                        "400": _error("bad input or options (message says what to fix)"),
                                        "401": _error("API keys are on and none (or a wrong one) was sent"),
                                        "403": _error("sent by a page of another web site"),
-                                       "413": _error("upload larger than the limit"),
+                                       "413": _error(TOO_LARGE),
                                        "429": _error("too many submissions from this client; see Retry-After"),
                                        "503": _error("the queue is full; see Retry-After")}},
             },
@@ -112,8 +118,10 @@ def openapi_document() -> dict:
                                         "schema": {"type": "string", "enum": list(result_files())}}],
                 "get": {"summary": "One output by kind", "operationId": "getResultKind",
                         "parameters": [{"name": "download", "in": "query", "schema": {"type": "string"}}],
-                        "responses": {"200": {"description": "the file"},
-                                      "404": _error("no such job or kind"), "409": _error("the job is not done")}},
+                        "responses": {"200": {"description": "the file (the report as strict JSON: a figure that "
+                                                              "could not be measured is null)"},
+                                      "404": _error("no such job or kind"), "409": _error("the job is not done"),
+                                      "500": _error("the job's stored report is damaged")}},
             },
             "/jobs/{job_id}/preview/{frame}": {
                 "parameters": [JOB_ID, {"name": "frame", "in": "path", "required": True,

@@ -2,16 +2,20 @@
 
 from __future__ import annotations
 
+import logging
+import math
 from datetime import UTC, datetime
 
 from flask import Blueprint, abort, current_app, flash, g, redirect, render_template, request, url_for
 
 from converter.errors import InputError
+from converter.formats import captures
 from converter.options import option_fields
 from converter.outputs import choices, output_files
 from converter.playcost import playback_class
 from webapp.eta import standing
-from webapp.jobstore import DONE
+from webapp.jobstore import DONE, damaged
+from webapp.limits import size_text, upload_limit
 from webapp.messages import user_words
 from webapp.openapi import openapi_document
 from webapp.presets import PRESETS, estimate_sizes
@@ -20,8 +24,15 @@ from webapp.storage import is_job_id
 from webapp.submit import OPTION_FIELDS, create_job
 
 pages = Blueprint("pages", __name__)
+log = logging.getLogger("facesvg.webapp")
 
-ACCEPT = ".glb,.gltf,.zip,.obj,model/gltf-binary,model/gltf+json,application/zip"
+# Every face file converter.formats loads (recognised by content; these are their usual names): glTF and GLB (a
+# VRM avatar is a GLB), a zip of OBJ/PLY frames or of a mesh and its point cache, an OBJ or PLY mesh.
+FACE_SUFFIXES = (".glb", ".gltf", ".vrm", ".zip", ".obj", ".ply")
+ACCEPT = ",".join((*FACE_SUFFIXES, "model/gltf-binary", "model/gltf+json", "application/zip"))
+CACHE_ACCEPT = ".pc2,.mdd,.npy"  # the point caches converter.formats.pointcache reads
+FACE_FIELDS = ("clone_target",)  # path options that take a face like the main input (checked as one)
+CAPTURE_ACCEPT = ",".join(captures.extensions())  # every capture layout's usual suffixes
 
 
 def queue():
@@ -40,16 +51,23 @@ def when(ts: float | None) -> str:
 @pages.app_template_filter("kb")
 def kb(n: int | None) -> str:
     """Bytes as KB/MB text."""
-    if n is None:
+    if not isinstance(n, (int, float)) or isinstance(n, bool) or not math.isfinite(n):
         return "—"
     return f"{n / 1024:.1f} KB" if n < 1 << 20 else f"{n / (1 << 20):.2f} MB"
 
 
 @pages.app_template_filter("num")
-def num(value) -> str:
-    """A report figure for display: whole numbers without decimals, others to 4 significant digits."""
-    if isinstance(value, float):
-        return f"{value:.0f}" if value.is_integer() else f"{value:.4g}"
+def num(value: object, spec: str = "") -> str:
+    """A figure for display: whole numbers bare, others to 4 significant digits or spec; missing or NaN: a dash."""
+    if value is None or isinstance(value, bool):
+        return "—" if value is None else str(value)
+    if isinstance(value, (int, float)):
+        if not math.isfinite(value):
+            return "—"
+        if spec:
+            return format(value, spec)
+        if isinstance(value, float):
+            return f"{value:.0f}" if value.is_integer() else f"{value:.4g}"
     return str(value)
 
 
@@ -65,8 +83,17 @@ def form_fields() -> list[dict]:
         out.append({"name": spec.name, "label": meta.label or spec.name, "widget": widget, "value": spec.default,
                     "choices": dict(offered or {}), "min": meta.minimum, "max": meta.maximum,
                     "step": 1 if spec.type is int else "any", "placeholder": meta.unset, "hint": meta.help,
-                    "accept": meta.accept, "advanced": meta.advanced})
+                    "accept": file_accept(spec.name, meta.accept), "advanced": meta.advanced})
     return out
+
+
+def file_accept(name: str, declared: str) -> str:
+    """An extra file input's accept list: a face's like the main input, the capture registry's, else declared."""
+    if name in FACE_FIELDS:
+        return ACCEPT
+    if name == "weights":
+        return CAPTURE_ACCEPT
+    return declared
 
 
 @pages.app_template_filter("duration")
@@ -89,9 +116,10 @@ def _form(status: int = 200, error: str | None = None, refill: dict | None = Non
     for control in controls:
         if refill and control["name"] in refill and control["widget"] != "file":
             control["value"] = refill[control["name"]]
-    return render_template("upload.html", fields=controls, refill=refill or {}, accept=ACCEPT, error=error,
-                           presets=PRESETS, recent=_visible(8),
-                           max_mb=current_app.config["MAX_CONTENT_LENGTH"] // (1 << 20)), status
+    limit = upload_limit(current_app.config)
+    return render_template("upload.html", fields=controls, refill=refill or {}, accept=ACCEPT,
+                           cache_accept=CACHE_ACCEPT, error=error, presets=PRESETS, recent=_visible(8),
+                           max_bytes=limit, max_text=size_text(limit)), status
 
 
 def _visible(limit: int) -> list:
@@ -157,6 +185,14 @@ def job_page(job_id: str):
     job = queue().get(job_id) if is_job_id(job_id) else None
     if job is None or not may_see(job):
         abort(404, description="There is no such job; it may have been deleted or cleaned up.")
+    try:
+        return _job_page(job)
+    except Exception as exc:  # a stored result the page cannot show: show the job as damaged, not a 500
+        log.warning("job %s: cannot show its page: %r", job.id, exc)
+        return _job_page(damaged(job, "its result could not be read"))
+
+
+def _job_page(job) -> str:
     kinds = queue().storage.available(job.id) if job.state == DONE else []
     labels = {**{key: f.label for key, f in output_files().items()}, "report": "Report (JSON)"}
     return render_template("job.html", job=job, kinds=kinds, labels=labels, standing=standing(queue(), job),
@@ -168,7 +204,7 @@ def _playback(job) -> str:
     """The playback class of a finished flat SVG job ('' when its report has no prediction)."""
     figures = ((job.result or {}).get("report") or {}).get("figures") or {}
     ms = figures.get("playback_ms_4x")
-    return playback_class(ms) if isinstance(ms, (int, float)) else ""
+    return playback_class(ms) if isinstance(ms, (int, float)) and math.isfinite(ms) else ""
 
 
 @pages.post("/jobs/<job_id>/delete")

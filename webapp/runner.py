@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import gzip
 import io
-import json
 import logging
 import os
 import tempfile
@@ -27,7 +26,8 @@ from converter.options import ConversionOptions, Eta
 from converter.outputs import output_kind
 from converter.userfiles import write_atomic
 from converter.verify import verify_animation
-from webapp.jobstore import CANCELLING, DONE, FAILED, RUNNING, Job, JobStore, open_store
+from webapp import strictjson
+from webapp.jobstore import CANCELLING, DONE, FAILED, RUNNING, Job, JobStore, is_damaged, open_store
 from webapp.lease import Heartbeat, new_owner
 from webapp.messages import user_words
 from webapp.storage import Storage, result_files
@@ -67,6 +67,8 @@ def execute(store: JobStore, storage: Storage, job_id: str, owner: str, lease_se
     job = store.get(job_id)
     if job is None or job.owner != owner:
         return "lost"
+    if is_damaged(job):  # its options cannot be read back: converting with defaults would be a wrong result
+        return _fail(store, storage, job_id, owner, job.message)
     with Heartbeat(store, job_id, owner, lease_seconds, parent_pid) as beat:
         progress = ProgressRecorder(store, job_id, owner=owner, lost=beat.lost)
         try:
@@ -212,7 +214,8 @@ def _finish(job: Job, storage: Storage, progress, preview_frames: int, options: 
     if kind.verify:
         progress("verify", CONVERT_SHARE)
         report["figures"].update(fidelity(main, anim))
-    outputs["report"] = json.dumps(report, indent=1, sort_keys=True).encode()
+    report = strictjson.finite(report)  # a figure that could not be measured (NaN) is stored, and served, as null
+    outputs["report"] = strictjson.dumps(report, indent=1, sort_keys=True).encode()
     files = result_files()
     for key, data in outputs.items():
         write_atomic(out / files[key][0], data)

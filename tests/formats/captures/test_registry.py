@@ -10,6 +10,7 @@ from converter.errors import InputError
 from converter.formats import captures
 from converter.formats.weights import is_capture as facade_is_capture
 from converter.formats.weights import parse_weights
+from converter.options import option_fields
 from tests.formats.captures import layout_samples
 
 # fixture in tests/data/captures -> the layout that must read it (H1b's fixtures from layout_samples.OWNERS)
@@ -131,3 +132,8 @@ def test_a_gltf_document_is_never_taken_for_a_capture():
     data = json.dumps(doc).encode()
     assert captures.detect(data) is None and captures.is_capture(data) is None
     assert captures.detect(json.dumps({"frames": doc["frames"]}).encode()).name == "frames-json"
+
+
+def test_the_weights_option_accepts_what_the_registry_reads():
+    meta = next(f for f in option_fields() if f.name == "weights").meta
+    assert tuple(sorted(meta.accept.split(","))) == captures.extensions()
