@@ -170,9 +170,11 @@ def fit(source: FaceAnimation, target: FaceAnimation, correspondences: str | Non
     if not len(s_faces) or not len(t_faces):
         raise InputError("dense cloning needs a deformable surface (not only eyes or teeth) on both faces.")
     size = np.ptp(s_base[np.unique(s_faces)], axis=0).max()
-    auto_s, auto_t, _ = landmarks.matched(s_base, skin_faces(source), t_base, skin_faces(target), source.name,
-                                         target.name)
     user_s, user_t = read_correspondences(correspondences, s_base, t_base)
+    # With the user's pairs, a face the rules fail on gives the landmarks found before the failure: the pairs
+    # stand in for the rest (the error without them says which landmark to give).
+    auto_s, auto_t, _ = landmarks.matched(s_base, skin_faces(source), t_base, skin_faces(target), source.name,
+                                         target.name, partial=len(user_s) > 0)
     src_pts, tgt_pts = merge(auto_s, auto_t, user_s, user_t, size)
     morph = VolumeMorph.fit(src_pts, tgt_pts)
     scale = np.sqrt(((tgt_pts - tgt_pts.mean(0)) ** 2).sum() / ((src_pts - src_pts.mean(0)) ** 2).sum())

@@ -10,9 +10,13 @@ lip vertices that nearly touch with opposed normals) is found for the mouth hand
 Every threshold is a fraction of the face's size (the mesh's height for the profile down the middle, the
 nose-top-to-chin height after that) and windows are counted in samples, so millimetre, centimetre and metre
 meshes give the same points; nothing needs the back of the head, a neck or eye parts, so a front-only face
-mask works. The points that only say how far the mesh extends (head top, sides, throat) are not matched
-between faces. When the rules fail, the error names the face and the missing feature, and says how to turn
-the face when it would work turned (looking down -z, or z-up).
+mask works. On a coarse mask (a morphable model's few hundred vertices) the profile loses its smaller extremes:
+the dip under the nose, the mouth's dip between merged lips; the lips are then placed in proportion to the nose
+(or to the chin, where the profile shows it as a bump), on the nearest extreme of their kind. The points that
+only say how far the mesh extends (head top, sides, throat) are not matched between faces. When the rules fail,
+the error names the face and the missing landmark, says what to give with --correspondences instead, and how
+to turn the face when it would work turned (looking down -z, or z-up); given correspondences, the points found
+before the failure are kept and the user's pairs add the rest.
 """
 
 from __future__ import annotations
@@ -26,7 +30,23 @@ from converter.errors import InputError
 
 SAMPLES = 240
 EXTENT_POINTS = ("head_top", "side_right", "side_left", "throat")  # depend on how much of the head the mesh has
-HINT = "make it look down +z with y up, or give --correspondences"
+# What a user gives instead of a missing landmark: pairs of points on the two faces, in the --correspondences file.
+BY_HAND = ('--correspondences with a pair for the {what} and more spread over the face (a JSON file '
+           '{{"pairs": [[source, target], ...]}}, each a vertex id or [x, y, z])')
+# Proportions of the profile below the nose on an average face, for coarse meshes whose profile has lost the
+# smaller extremes (the mouth's dip, the dip under the nose): the means of what the chain of extremes finds on the
+# sample face, the ICT head and MediaPipe's canonical face. Lengths are in nose lengths (nose top to nose bottom):
+# upper lip 0.14-0.29, mouth 0.25-0.43, lower lip 0.42-0.52 and chin 0.90-1.05 below the nose bottom; the nose
+# bottom is 0.37-0.55 tip-to-nose-top lengths below the tip. Each lip is a bump (+1) or a dip (-1).
+LIPS = (("lip_top", 0.2, 1), ("mouth", 0.33, -1), ("lip_bottom", 0.46, 1))
+CHIN = 0.96
+CHIN_RANGE = (0.75, 1.5)  # a bump of the profile this far below the nose bottom is the chin
+LIPS_REACH = 0.8  # a chain whose lower lip is farther below the nose bottom took the chin for it
+NOSE_REACH = 0.7  # a dip farther below the tip (in tip-to-nose-top lengths) is not the nose's bottom
+NOSE_DEPTH = 1.5  # the nose's top and bottom lie behind its tip by at most this many tip-to-top lengths (0.4-0.7)
+BEND = 0.15  # the least change of slope of a nose's top where the profile has no dip there
+SNAP = 0.1  # a proportional lip point moves to an extreme of its kind this near (in nose lengths)
+RELIEF = 0.03  # the least relief (in nose lengths) of the profile from the nose bottom down past the chin
 # Orientations tried when the rules fail, to tell the user how to turn the face: (description, rotation).
 TURNS = (
     ("it looks down -z; turn it 180 degrees about y", np.diag([-1.0, 1.0, -1.0])),
@@ -80,17 +100,25 @@ def _first_after(idx: np.ndarray, start: int, step: int) -> int | None:
 
 
 class NotFound(Exception):
-    """A rule found no feature: what is missing and why (worded for the user)."""
+    """A rule found no feature: what is missing and why (worded for the user), and the points found before."""
+
+    def __init__(self, what: str, why: str, found: dict[str, np.ndarray] | None = None):
+        super().__init__(f"no {what}: {why}")
+        self.what = what
+        self.found = dict(found or {})
 
 
-def detect(verts: np.ndarray, faces: np.ndarray, name: str = "face") -> dict[str, np.ndarray]:
-    """Named 3D feature points on a neutral face; InputError naming the face and what is missing on failure."""
+def detect(verts: np.ndarray, faces: np.ndarray, name: str = "face", partial: bool = False) -> dict[str, np.ndarray]:
+    """Named 3D feature points on a neutral face; InputError naming the face and what is missing on failure
+    (with partial, the points found before the failure instead: the user's correspondences add the rest)."""
     verts = np.asarray(verts, np.float64)
     faces = np.asarray(faces)
     try:
         return _detect(verts, faces)
     except NotFound as exc:
-        why = str(exc)
+        if partial:
+            return exc.found
+        why, what = str(exc), exc.what
     turn = None
     if len(faces) and np.isfinite(verts).all():
         for text, rot in TURNS:
@@ -100,27 +128,140 @@ def detect(verts: np.ndarray, faces: np.ndarray, name: str = "face") -> dict[str
                 continue
             turn = text
             break
-    advice = f"{turn}, or give --correspondences" if turn else HINT
+    by_hand = BY_HAND.format(what=what)
+    advice = f"{turn}, or give {by_hand}" if turn else f"make it look down +z with y up, or give {by_hand}"
     raise InputError(f"cannot place landmarks on {name!r} automatically: {why}; {advice}.")
+
+
+def _centreline(verts: np.ndarray, faces: np.ndarray, tip: np.ndarray, mid: float, ext: np.ndarray) -> float:
+    """x of the face's middle: the nose's, midway between where rows across it just above the tip fall 2% of the
+    mesh's height behind their top (a mask cut unevenly is not centred on its box; a coarse mask's tip vertex
+    can sit off the ridge); the box's middle mid where the rows show no nose at the tip."""
+    rows = tip[1] + np.array([-0.01, 0.0, 0.02, 0.04]) * ext[1]
+    xs = np.linspace(tip[0] - 0.15 * ext[0], tip[0] + 0.15 * ext[0], SAMPLES // 3)
+    z = _front_hits(verts, faces, np.column_stack([np.tile(xs, len(rows)), np.repeat(rows, len(xs))]))
+    centres = []
+    for zr in z.reshape(len(rows), len(xs)):
+        if not np.isfinite(zr).any():
+            continue
+        j = int(np.nanargmax(zr))
+        low = ~(zr >= zr[j] - 0.02 * ext[1])  # nan counts as low
+        left, right = np.flatnonzero(low[:j]), np.flatnonzero(low[j:])
+        if len(left) and len(right):
+            a, b = left[-1], j + right[0]  # the first samples below the level on either side
+            centres.append(0.5 * (_crossing(xs, zr, a, a + 1, zr[j] - 0.02 * ext[1])
+                                  + _crossing(xs, zr, b, b - 1, zr[j] - 0.02 * ext[1])))
+    x = float(np.mean(centres)) if centres else mid
+    return x if abs(x - tip[0]) < 0.05 * ext[0] else mid  # rows far off the tip did not cross a nose
+
+
+def _crossing(xs: np.ndarray, z: np.ndarray, low: int, high: int, level: float) -> float:
+    """x where z reaches level between sample low (below it, or nan) and its neighbour high (above it)."""
+    if not np.isfinite(z[low]):
+        return float(0.5 * (xs[low] + xs[high]))
+    t = (level - z[low]) / (z[high] - z[low])
+    return float(xs[low] + t * (xs[high] - xs[low]))
+
+
+def _nose_top(zf: np.ndarray, mn: np.ndarray, i_tip: int, dy: float) -> int | None:
+    """Profile index of the nose's top: the first dip above the tip, or on a coarse profile that runs from the nose
+    straight up the forehead, where it bends most from the nose's slope to the forehead's (the largest change of
+    slope over 1/40 of the profile, within 0.35 of it above the tip; a face's is 0.4-0.8, a convex shape's none).
+    dy is the samples' spacing."""
+    i = _first_after(mn, i_tip, +1)
+    if i is not None:
+        return i
+    k = SAMPLES // 40
+    d2 = np.full(len(zf), -np.inf)
+    d2[k:-k] = zf[2 * k:] - 2 * zf[k:-k] + zf[:-2 * k]
+    hi = min(i_tip + round(0.35 * SAMPLES), len(zf) - k)
+    if hi <= i_tip + k:
+        return None
+    j = i_tip + k + int(np.argmax(d2[i_tip + k:hi]))
+    return j if d2[j] > BEND * k * dy else None
+
+
+def _nose_bottom(zf: np.ndarray, mn: np.ndarray, i_tip: int, i_top: int, dy: float) -> int | None:
+    """Profile index of the nose's bottom: the first dip below the tip, or on a coarse profile that runs from the
+    nose's underside straight into the upper lip, the point farthest behind the line from the tip down one
+    tip-to-nose-top length (None when the mesh ends before that)."""
+    n = i_top - i_tip
+    i = _first_after(mn, i_tip, -1)
+    if i is not None and i_tip - i <= NOSE_REACH * n:
+        return i
+    j = i_tip - n
+    if j < 0:
+        return None
+    seg = zf[j:i_tip + 1]
+    behind = seg - np.linspace(seg[0], seg[-1], len(seg))
+    i = int(np.argmin(behind))
+    return j + i if behind[i] < -0.05 * dy * n else None  # 0.2-0.3 tip-to-top lengths behind on a face
+
+
+def _chain(mx: np.ndarray, mn: np.ndarray, i_nb: int) -> tuple[int, int, int] | None:
+    """Profile indices of the upper lip, mouth and lower lip as the extremes after the nose bottom i_nb: a bump,
+    a dip, a bump (None when the profile has fewer)."""
+    i_lt = _first_after(mx, i_nb, -1)
+    i_m = None if i_lt is None else _first_after(mn, i_lt, -1)
+    i_lb = None if i_m is None else _first_after(mx, i_m, -1)
+    return None if i_lb is None else (i_lt, i_m, i_lb)
+
+
+def _proportional(zc: np.ndarray, mx: np.ndarray, mn: np.ndarray, i_nb: int,
+                  n_nose: int) -> tuple[int, int, int, int | None]:
+    """Profile indices of the upper lip, mouth and lower lip placed in proportion below the nose bottom i_nb (the
+    lower lip's may be below 0: the mesh ends above it), and of the chin where the profile shows it as a bump."""
+    # A coarse mesh (a few vertices across the lips) merges the lips or loses the mouth's dip, and the chain of
+    # extremes runs on to the chin: place the lips between the nose and the chin where the chin is a bump of the
+    # profile, else by the nose's length; each on the nearest extreme of its kind where the profile has one (for
+    # the mouth, also the middle of a gap the rays went through).
+    below = i_nb - mx
+    chin = mx[(below >= CHIN_RANGE[0] * n_nose) & (below <= CHIN_RANGE[1] * n_nose)]
+    i_chin = int(chin[0]) if len(chin) else None  # the first bump in range: a lower one is on the neck
+    unit = n_nose if i_chin is None else (i_nb - i_chin) / CHIN
+    gap = np.diff(np.r_[0, np.isnan(zc).astype(np.int8), 0])
+    dips = np.union1d(mn, (np.flatnonzero(gap == 1) + np.flatnonzero(gap == -1) - 1) // 2)
+    out, prev = [], i_nb
+    for _, frac, kind in LIPS:
+        want = min(i_nb - round(frac * unit), prev - 1)
+        cand = mx if kind > 0 else dips
+        cand = cand[(cand < prev) & (np.abs(cand - want) <= SNAP * unit)]
+        prev = int(cand[np.argmin(np.abs(cand - want))]) if len(cand) else want
+        out.append(prev)
+    if i_chin is not None and i_chin >= out[2]:
+        i_chin = None
+    return out[0], out[1], out[2], i_chin
+
+
+def _chin_window(zf: np.ndarray, i_lb: int, i_top: int, height: float) -> tuple[int, int, int | None]:
+    """Rules 13-15 on a coarse mesh: (lo, top, throat) where the chin is the most forward point of zf[lo:top]."""
+    # From a third of a nose-top-to-lower-lip span below the lower lip down to one span, and above the throat
+    # (the deepest point below it) if the mesh has a neck. In spans, not down to the mesh's lower edge, so the
+    # chin does not depend on how much neck the mesh has; the window's top keeps the chin on the same spot of a
+    # flat chin front on fine and coarse meshes. Empty (top <= lo) when the mesh ends above it.
+    n_span = i_top - i_lb
+    i_throat = _first_after(_peaks(-zf, 0.05 * height), i_lb, -1) if i_lb > 0 else None
+    lo = max(i_lb - n_span, 0 if i_throat is None else i_throat)
+    return lo, i_lb - max(1, round(n_span / 3)), i_throat
 
 
 def _detect(verts: np.ndarray, faces: np.ndarray) -> dict[str, np.ndarray]:
     """The rules of detect(); NotFound when the nose or chin is missing."""
     if not len(faces):
-        raise NotFound("no nose tip: the mesh has no triangles")
+        raise NotFound("nose tip", "the mesh has no triangles")
     used = np.unique(faces)
     v = verts[used]
     if not np.isfinite(v).all():
-        raise NotFound("no nose tip: some vertices are not finite numbers")
+        raise NotFound("nose tip", "some vertices are not finite numbers")
     ext = np.ptp(v, axis=0)
     if ext[2] < 0.05 * max(ext[0], ext[1]) or min(ext[0], ext[1]) <= 0:
-        raise NotFound("no nose tip: the mesh is flat, with no depth along z")
+        raise NotFound("nose tip", "the mesh is flat, with no depth along z")
     tip = v[np.argmax(v[:, 2])].copy()
     mid = 0.5 * (v.max(0) + v.min(0))
     rel_y = (tip[1] - v[:, 1].min()) / ext[1]
     if abs(tip[0] - mid[0]) > 0.15 * ext[0] or not 0.2 <= rel_y <= 0.9:
-        raise NotFound("no nose tip: the mesh has no clear forward-most point near its centre")
-    tip[0] = mid[0]  # the centreline: a face is near symmetric
+        raise NotFound("nose tip", "the mesh has no clear forward-most point near its centre")
+    tip[0] = _centreline(verts, faces, tip, mid[0], ext)
     height = ext[1]
     pts: dict[str, np.ndarray] = {
         "nose_tip": v[np.argmax(v[:, 2])], "head_top": v[np.argmax(v[:, 1])],
@@ -128,59 +269,78 @@ def _detect(verts: np.ndarray, faces: np.ndarray) -> dict[str, np.ndarray]:
     }
     ys = np.linspace(v[:, 1].min(), v[:, 1].max(), SAMPLES)
     zc = _front_hits(verts, faces, np.column_stack([np.full(SAMPLES, tip[0]), ys]))
+    zf = _filled(zc)
     prom = 0.0015 * height
     mx, mn = _extremes(zc, prom)
     i_tip = int(np.argmin(np.abs(ys - tip[1])))
 
-    def centre(name: str, i: int | None) -> int | None:
-        if i is not None and np.isfinite(zc[i]):
-            pts[name] = np.array([tip[0], ys[i], zc[i]])
+    def centre(name: str, i: int | None, profile: np.ndarray = zc) -> int | None:
+        if i is not None and 0 <= i < SAMPLES and np.isfinite(profile[i]):
+            pts[name] = np.array([tip[0], ys[i], profile[i]])
         return i
 
-    i_top = centre("nose_top", _first_after(mn, i_tip, +1))
+    i_top = centre("nose_top", _nose_top(zf, mn, i_tip, ys[1] - ys[0]))
     if i_top is not None:
         centre("glabella", _first_after(mx, i_top, +1))
-    i = centre("nose_bottom", _first_after(mn, i_tip, -1))
-    i_chin = None
-    if i is not None:
-        i = centre("lip_top", _first_after(mx, i, -1))
-    if i is not None:
-        i = centre("mouth", _first_after(mn, i, -1))
-    if i is not None:
-        i = centre("lip_bottom", _first_after(mx, i, -1))
-    if i is not None:
-        # Rules 13-15 on a coarse mesh: the chin is the most forward point from a third of a nose-top-to-
-        # lower-lip span below the lower lip down to one span (and above the throat, the deepest point below
-        # it, if the mesh has a neck), the fold the deepest point above the chin. In spans, not down to the
-        # mesh's lower edge, so the chin does not depend on how much neck the mesh has; the window's top
-        # keeps the chin on the same spot of a flat chin front on fine and coarse meshes.
-        zf = _filled(zc)
-        big = _peaks(-zf, 0.05 * height)
-        i_throat = _first_after(big, i, -1)
-        n_span = i_top - i if i_top is not None else SAMPLES // 4  # in samples: exact at any scale
-        span = (ys[1] - ys[0]) * n_span
-        lo = max(i - n_span, 0 if i_throat is None else i_throat)
-        top = i - max(1, round(n_span / 3))
-        if top > lo:
-            i_chin = lo + int(np.argmax(zf[lo:top]))
-            centre("chin", i_chin)
-            if i - i_chin > 2:
-                j = i_chin + 1 + int(np.argmin(zf[i_chin + 1:i]))
-                # A fold shallower than 1% of the span is no fold (a flat chin front): take the middle.
-                flat = zf[j] > min(zf[i_chin], zf[i]) - 0.01 * span
-                centre("lip_chin_fold", (i_chin + i) // 2 if flat else j)
-            if i_throat is not None:
-                centre("throat", i_throat)
+    if "nose_top" not in pts:
+        raise NotFound("nose bridge", "the profile down the middle of the face has no dip above its forward-most "
+                       "point", pts)
+    # A dip far behind the tip (a head seen from below or above has one) is no nose's bridge.
+    nose_h = ys[i_top] - ys[i_tip]
+    if tip[2] - zf[i_top] > NOSE_DEPTH * nose_h:
+        for name in ("nose_top", "glabella"):
+            pts.pop(name, None)
+        raise NotFound("nose bridge", "the dip above the forward-most point of the profile down the middle of the "
+                       "face is deeper than a nose is long", pts)
+    i_nb = centre("nose_bottom", _nose_bottom(zf, mn, i_tip, i_top, ys[1] - ys[0]))
+    if "nose_bottom" in pts and tip[2] - zf[i_nb] > NOSE_DEPTH * nose_h:
+        del pts["nose_bottom"]
+    if "nose_bottom" not in pts:
+        raise NotFound("chin", "the profile down the middle of the face has no nose-lips-chin shape below its "
+                       "forward-most point", pts)
+    n_nose = i_top - i_nb  # the nose's length in samples: exact at any scale
+    nose_len = ys[i_top] - ys[i_nb]
+    # The chain of extremes, if its chin is one: not past the lips' reach, with a chin at most 1.5 nose lengths
+    # below the nose and half of one behind the lower lip (else the chain took the chin for the lower lip and
+    # the window below it holds the neck); in proportion otherwise.
+    chain, i_bump = _chain(mx, mn, i_nb), None
+    if chain is not None and i_nb - chain[2] <= LIPS_REACH * n_nose:
+        lo, top, _ = _chin_window(zf, chain[2], i_top, height)
+        i_c = lo + int(np.argmax(zf[lo:top])) if top > lo else None
+        if i_c is None or i_nb - i_c > CHIN_RANGE[1] * n_nose or zf[chain[2]] - zf[i_c] > 0.5 * nose_len:
+            chain = None
+    else:
+        chain = None
+    if chain is None:
+        *chain, i_bump = _proportional(zc, mx, mn, i_nb, n_nose)
+    for name, i in zip(("lip_top", "mouth", "lip_bottom"), chain):
+        centre(name, i, zf)  # filled: an open mouth's gap
     if "mouth" in pts and "lip_top" in pts and "lip_bottom" in pts:
         lips = 0.5 * (pts["lip_top"] + pts["lip_bottom"])
         if pts["mouth"][2] < lips[2] - 0.03 * height:  # the ray went through the lips' slit
             pts["mouth"] = np.array([tip[0], pts["mouth"][1], lips[2] - 0.01 * height])
-    if "nose_top" not in pts:
-        raise NotFound("no nose bridge: the profile down the middle of the face has no dip above its "
-                       "forward-most point")
-    if "chin" not in pts:
-        raise NotFound("no chin: the profile down the middle of the face has no nose-lips-chin shape below "
-                       "its forward-most point")
+    i = chain[2]
+    lo, top, i_throat = _chin_window(zf, i, i_top, height)
+    if i_bump is None and top <= lo:
+        below = (ys[i_nb] - ys[0]) / nose_len
+        raise NotFound("chin", f"the mesh ends {below:.2g} nose lengths below the nose's bottom, where a chin is "
+                       f"about one", pts)
+    # A face has lips and a chin standing off the line from the nose's bottom down past the chin; a profile that
+    # keeps to that line (a lower face flattened or cut off by a plane) has neither.
+    lo = min(lo, i_bump) if i_bump is not None else lo
+    seg = zf[lo:i_nb + 1]
+    if np.abs(seg - np.linspace(seg[0], seg[-1], len(seg))).max() < RELIEF * nose_len:
+        raise NotFound("chin", "the profile down the middle of the face is flat below the nose, with no lips or "
+                       "chin standing out", pts)
+    i_chin = lo + int(np.argmax(zf[lo:top])) if i_bump is None else i_bump
+    centre("chin", i_chin, zf)
+    if i - i_chin > 2:
+        j = i_chin + 1 + int(np.argmin(zf[i_chin + 1:i]))
+        # A fold shallower than 1% of the span is no fold (a flat chin front): take the middle.
+        flat = zf[j] > min(zf[i_chin], zf[i]) - 0.01 * (ys[i_top] - ys[i])
+        centre("lip_chin_fold", (i_chin + i) // 2 if flat else j)
+    if i_throat is not None:
+        centre("throat", i_throat)
     # Sideways profiles reach 0.8 nose-top-to-chin heights out (a face's half width), not to the mesh's edge,
     # so a face mask cut before the ears samples the same points as a whole head.
     face_h = pts["nose_top"][1] - pts["chin"][1]  # the face's own size, whatever the mesh's extent
@@ -200,6 +360,12 @@ def _detect(verts: np.ndarray, faces: np.ndarray) -> dict[str, np.ndarray]:
                 # eyeball (which bulges out of it) or is an open hole (rays through it were dropped above).
                 win = np.where((xs >= 0.1 * face_h) & (xs <= 0.3 * face_h) & np.isfinite(z), z, np.inf)
                 j = int(np.argmin(win)) if np.isfinite(win).any() else None
+                if j is not None:
+                    # The middle of the socket's floor (its points within 1% of a face height of the deepest):
+                    # a flat floor's deepest point moves far with small changes of a coarse mesh.
+                    off = np.flatnonzero(win > win[j] + 0.01 * face_h)
+                    left, right = off[off < j], off[off > j]
+                    j = ((left[-1] + 1 if len(left) else 0) + (right[0] - 1 if len(right) else len(win) - 1)) // 2
             else:
                 mxs, mns = _extremes(z, prom)
                 j = _first_after(mns if kind == "min" else mxs, 1, +1)
@@ -277,10 +443,11 @@ def line_points(verts: np.ndarray, line: np.ndarray, params: np.ndarray) -> np.n
 
 
 def matched(src_verts: np.ndarray, src_faces: np.ndarray, tgt_verts: np.ndarray, tgt_faces: np.ndarray,
-            src_name: str = "source", tgt_name: str = "target"):
-    """Corresponding point arrays (n, 3), (n, 3) and names from the rules applied to both faces."""
-    a = detect(src_verts, src_faces, src_name)
-    b = detect(tgt_verts, tgt_faces, tgt_name)
+            src_name: str = "source", tgt_name: str = "target", partial: bool = False):
+    """Corresponding point arrays (n, 3), (n, 3) and names from the rules applied to both faces (with partial,
+    only the points found on both where the rules fail on one)."""
+    a = detect(src_verts, src_faces, src_name, partial)
+    b = detect(tgt_verts, tgt_faces, tgt_name, partial)
     names = [k for k in a if k in b and k not in EXTENT_POINTS
              and not any(np.allclose(a[k], a[j]) or np.allclose(b[k], b[j]) for j in a if j < k and j in b)]
     src = [a[k] for k in names]
@@ -295,4 +462,4 @@ def matched(src_verts: np.ndarray, src_faces: np.ndarray, tgt_verts: np.ndarray,
             src += list(line_points(src_verts, la, s))
             tgt += list(line_points(tgt_verts, lb, s))
             names += [f"{tag}_{k}" for k in range(len(s))]
-    return np.array(src), np.array(tgt), names
+    return np.array(src).reshape(-1, 3), np.array(tgt).reshape(-1, 3), names
