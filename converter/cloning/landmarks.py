@@ -108,9 +108,10 @@ class NotFound(Exception):
         self.found = dict(found or {})
 
 
-def detect(verts: np.ndarray, faces: np.ndarray, name: str = "face", partial: bool = False) -> dict[str, np.ndarray]:
-    """Named 3D feature points on a neutral face; InputError naming the face and what is missing on failure
-    (with partial, the points found before the failure instead: the user's correspondences add the rest)."""
+def detect(verts: np.ndarray, faces: np.ndarray, name: str = "face", partial: bool = False,
+           by_hand: str = BY_HAND) -> dict[str, np.ndarray]:
+    """Named 3D feature points on a neutral face; InputError naming the face, what is missing and (by_hand, with
+    {what}) what to give instead on failure (with partial, the points found before the failure instead)."""
     verts = np.asarray(verts, np.float64)
     faces = np.asarray(faces)
     try:
@@ -128,7 +129,7 @@ def detect(verts: np.ndarray, faces: np.ndarray, name: str = "face", partial: bo
                 continue
             turn = text
             break
-    by_hand = BY_HAND.format(what=what)
+    by_hand = by_hand.format(what=what)
     advice = f"{turn}, or give {by_hand}" if turn else f"make it look down +z with y up, or give {by_hand}"
     raise InputError(f"cannot place landmarks on {name!r} automatically: {why}; {advice}.")
 

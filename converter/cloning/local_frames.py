@@ -57,11 +57,15 @@ def ratio(w_src: np.ndarray, w_tgt: np.ndarray) -> np.ndarray:
         r = np.where(small, whole, np.abs(w_tgt) / np.abs(w_src))
     return np.clip(r, whole / 3, whole * 3)  # a w-point far off in one axis must not blow the motion up
 
+BY_HAND = ('--correspondences with the {what} and the other landmarks by name (a JSON file {{"landmarks": '
+           '{{name: vertex id}}}}), or clone with the dense method')
+
 
 def landmark_ids(verts: np.ndarray, faces: np.ndarray, correspondences: str | None,
                  name: str = "source") -> dict[str, int]:
     """Landmark name -> vertex id on the source base (automatic; a JSON {"landmarks": {name: id}} overrides)."""
-    pts = landmarks.detect(verts, faces, name)
+    # the user's landmarks fill in what cannot be found; this method takes them by name, not as pairs
+    pts = landmarks.detect(verts, faces, name, partial=bool(correspondences), by_hand=BY_HAND)
     up, lo = landmarks.lip_contact(verts, faces, pts)
     if len(up):
         pts["lip_corner_0"], pts["lip_corner_1"] = verts[up[0]], verts[up[-1]]

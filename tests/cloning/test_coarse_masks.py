@@ -18,7 +18,7 @@ from scipy.interpolate import griddata
 
 from converter import formats
 from converter.animation import FaceAnimation, Part
-from converter.cloning import clone, dense, landmarks
+from converter.cloning import clone, dense, landmarks, local_frames
 from converter.errors import InputError
 from converter.formats.ictfacekit import load_ict_head
 
@@ -281,3 +281,15 @@ def regions(frames: np.ndarray, pts: dict[str, np.ndarray], ids: np.ndarray, siz
     chin = np.linalg.norm(base - pts["chin"], axis=1) < 0.15 * size
     forehead = base[:, 1] > pts["glabella"][1]
     return float(motion[chin].mean()), float(motion[forehead].mean())
+
+
+def test_frames_method_names_its_own_landmark_file_and_takes_it(sample, tmp_path):
+    """The frames method finds landmarks on the source: a chinless one is told to name them, and named ones fill in."""
+    v, f = chinless(sample, "flattened")
+    with pytest.raises(InputError, match=r"no chin.*\{\"landmarks\": \{name: vertex id\}\}.*dense method"):
+        local_frames.landmark_ids(v, f, None, "flattened_mask")
+    chin = (sample["pts"]["chin"] + OFFSET) * UNITS["mm"]
+    corr = tmp_path / "landmarks.json"
+    corr.write_text(json.dumps({"landmarks": {"chin": int(np.argmin(np.linalg.norm(v[:, :2] - chin[:2], axis=1)))}}))
+    ids = local_frames.landmark_ids(v, f, str(corr), "flattened_mask")
+    assert ids["chin"] == json.loads(corr.read_text())["landmarks"]["chin"] and "nose_tip" in ids
