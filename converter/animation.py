@@ -24,6 +24,30 @@ DEFAULT_PART_COLORS: dict[str, tuple[float, float, float]] = {
 }
 
 
+# No mesh has a coordinate this far out (in any unit): beyond it, the float32 squares of normals and areas overflow
+# and turn into NaN downstream, so such a position is refused with the NaN and infinite ones.
+MAX_COORDINATE = 1e15
+CHECK_FRAMES = 64  # frames checked at a time (a (T, V, 3) temporary of a long capture would be GBs)
+
+
+class NonFinitePositions(InputError):
+    """A FaceAnimation's frames hold NaN, infinite or absurdly large positions (formats.load names the file)."""
+
+
+def _check_positions(frames: np.ndarray) -> None:
+    """NonFinitePositions naming the first vertex and frame whose position is NaN, infinite or beyond
+    MAX_COORDINATE."""
+    for s in range(0, len(frames), CHECK_FRAMES):
+        ok = np.abs(frames[s:s + CHECK_FRAMES]) <= MAX_COORDINATE  # False for NaN
+        if ok.all():
+            continue
+        k, v = (int(i) for i in np.argwhere(~ok.all(axis=2))[0])
+        value = frames[s + k, v]
+        what = ("a NaN or infinite position" if not np.isfinite(value).all()
+                else f"a coordinate beyond ±{MAX_COORDINATE:g} ({float(np.abs(value).max()):g})")
+        raise NonFinitePositions(f"vertex {v} of frame {s + k} has {what}; fix or re-export the animation.")
+
+
 @dataclass(frozen=True)
 class Part:
     """A group of triangles: semantic name (skin, eye, iris, teeth, mouth, lashes), display base colour, label.
@@ -69,9 +93,7 @@ class FaceAnimation:
             raise InputError("the mesh has no triangles; export a mesh with faces.")
         if faces.min() < 0 or faces.max() >= frames.shape[1]:
             raise InputError("a triangle refers to a vertex that does not exist; the file is corrupt.")
-        if not np.isfinite(frames).all():
-            bad = int(np.argwhere(~np.isfinite(frames).all(axis=(1, 2)))[0, 0])
-            raise InputError(f"frame {bad} has NaN or infinite vertex positions; fix or re-export the animation.")
+        _check_positions(frames)
         if part_ids.shape != (faces.shape[0],) or (len(self.parts) and part_ids.max() >= len(self.parts)):
             raise InputError("part ids do not match the triangles; the file is corrupt.")
         if not (np.isfinite(self.fps) and self.fps > 0):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, NamedTuple
@@ -211,7 +212,7 @@ class ConversionOptions:
     fdp: str | None = option(None, "feature points of the face (JSON or Xface .fdp)", label="FDP file", path=True,
                              advanced=True)
     clone_target: str | None = option(None, "a glTF/GLB/OBJ face to put the animation onto before converting",
-                                      label="Clone onto face", path=True, accept=".glb,.gltf,.obj,.zip",
+                                      label="Clone onto face", path=True, accept=".glb,.gltf,.vrm,.obj,.ply,.zip",
                                       advanced=True)
     clone_method: str = option("dense", "how the animation is put onto the clone target", label="Cloning method",
                                choices=CLONE_METHODS, advanced=True)
@@ -219,9 +220,10 @@ class ConversionOptions:
                                     path=True, accept=".zip", advanced=True)
     correspondences: str | None = option(None, "your own point correspondences, for dense cloning",
                                          label="Correspondences", path=True, advanced=True)
-    weights: str | None = option(None, "blendshape weight capture (Live Link Face CSV, ARKit weight JSON) that "
+    weights: str | None = option(None, "blendshape weight capture (Live Link Face, Face Cap, MediaPipe, "
+                                 "Audio2Face, Rokoko, Rhubarb, ...: `facesvg info` names its layout) that "
                                  "drives the face's named morph targets", label="Weight capture", path=True,
-                                 accept=".csv,.json", advanced=True)
+                                 accept=".csv,.json,.jsonl,.tsv,.txt", advanced=True)
 
     def __post_init__(self) -> None:
         if self.preset is not None and self.preset in PRESETS:
@@ -319,12 +321,13 @@ class Report:
     warnings: list[str] = field(default_factory=list)
 
     def to_json(self) -> dict:
-        """Plain dict, rounded for display and metadata."""
+        """Plain dict, rounded for display and metadata; strict JSON: a figure or timing that is not a finite
+        number (one that could not be computed) is left out."""
         return {
             "counts": dict(self.counts),
             "sizes": dict(self.sizes),
-            "timings": {k: round(v, 4) for k, v in self.timings.items()},
-            "figures": {k: (round(v, 4) if isinstance(v, float) else v) for k, v in self.figures.items()},
+            "timings": _finite_rounded(self.timings),
+            "figures": _finite_rounded(self.figures),
             "warnings": list(self.warnings),
         }
 
@@ -344,8 +347,14 @@ class Report:
         return ", ".join(parts)
 
     def dumps(self) -> str:
-        """JSON text."""
-        return json.dumps(self.to_json(), sort_keys=True)
+        """JSON text (strict: no NaN or Infinity)."""
+        return json.dumps(self.to_json(), sort_keys=True, allow_nan=False)
+
+
+def _finite_rounded(values: Mapping[str, Any]) -> dict:
+    """values with floats rounded to 4 decimals and the non-finite ones (NaN, inf) left out."""
+    return {k: round(v, 4) if isinstance(v, float) else v for k, v in values.items()
+            if not isinstance(v, float) or math.isfinite(v)}
 
 
 _OPTION_FIELDS = tuple(OptionField(f.name, _value_type(str(f.type)), f.default, f.metadata["option"])

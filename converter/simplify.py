@@ -255,7 +255,8 @@ def simplify(anim: FaceAnimation, max_triangles: int, report: Report,
         worst, mean, per_part = budget_deviation_px(anim, simplified, faces, part_ids, options,
                                                     span(progress, deviation_from, 1.0))
         report.figures["budget_deviation_px"] = worst
-        report.figures["budget_deviation_mean_px"] = mean
+        if mean is not None:  # no original vertex ever shown: no mean to give
+            report.figures["budget_deviation_mean_px"] = mean
         for p, dev in per_part.items():  # mouth interior and teeth are mostly behind the lips: say so per part
             name = f"budget_deviation_px_{anim.parts[p].name}"
             report.figures[name] = max(report.figures.get(name, 0.0), dev)
@@ -264,9 +265,10 @@ def simplify(anim: FaceAnimation, max_triangles: int, report: Report,
 
 def budget_deviation_px(original: FaceAnimation, simplified: FaceAnimation, faces: np.ndarray,
                         part_ids: np.ndarray, options: ConversionOptions,
-                        progress: Progress = no_progress) -> tuple[float, float, dict[int, float]]:
-    """Max, mean and per-part max distance in output px, over all frames, between each original vertex (of
-    triangles that face the camera at that frame) and the point of the simplified surface it maps to.
+                        progress: Progress = no_progress) -> tuple[float, float | None, dict[int, float]]:
+    """Max, mean (None when no vertex is ever shown) and per-part max distance in output px, over all frames,
+    between each original vertex (of triangles that face the camera at that frame) and the point of the
+    simplified surface it maps to.
 
     Each original vertex is attached at the first frame to the closest point of the simplified mesh of its
     own part (barycentric coordinates); that point then follows the simplified animation."""
@@ -295,7 +297,7 @@ def budget_deviation_px(original: FaceAnimation, simplified: FaceAnimation, face
         dist = np.linalg.norm(cp - flat_pts, axis=1).reshape(len(pts), k)
         best = cand[np.arange(len(pts)), np.argmin(dist, axis=1)]
         nearest = cp.reshape(len(pts), k, 3)[np.arange(len(pts)), np.argmin(dist, axis=1)]
-        bary = points_to_barycentric(tris[best], nearest)
+        bary = barycentric(tris[best], nearest, points_to_barycentric)
         lf = local.reshape(-1, 3)
         incidence = csr_matrix((np.ones(lf.size, np.float32), (np.repeat(np.arange(len(lf)), 3), lf.ravel())),
                                shape=(len(lf), len(verts)))
@@ -318,7 +320,31 @@ def budget_deviation_px(original: FaceAnimation, simplified: FaceAnimation, face
             count += int(shown.sum())
         progress("deviation", min(s + FRAME_BLOCK, original.n_frames) / original.n_frames)
     worst = max(per_part.values(), default=0.0)
-    return worst, total / max(count, 1), per_part
+    return worst, (total / count if count else None), per_part
+
+
+def barycentric(tris: np.ndarray, pts: np.ndarray, solve) -> np.ndarray:
+    """Barycentric coordinates (n, 3) of points pts (n, 3) on triangles tris (n, 3, 3) by solve (trimesh's
+    points_to_barycentric); on a degenerate triangle (zero area: a segment or a point), where solve divides by
+    zero, those of the point's projection on its longest edge."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bary = np.asarray(solve(tris, pts), np.float64)
+    bad = np.flatnonzero(~np.isfinite(bary).all(axis=1))
+    if len(bad):
+        t, p = tris[bad], pts[bad]
+        edges = np.array([(0, 1), (1, 2), (2, 0)])
+        span_ = t[:, edges[:, 1]] - t[:, edges[:, 0]]  # (n, 3 edges, 3)
+        longest = np.argmax(np.einsum("nej,nej->ne", span_, span_), axis=1)
+        i, j = edges[longest, 0], edges[longest, 1]
+        d = span_[np.arange(len(bad)), longest]
+        dd = np.einsum("nj,nj->n", d, d)
+        u = np.einsum("nj,nj->n", p - t[np.arange(len(bad)), i], d) / np.where(dd > 0, dd, 1.0)
+        u = np.clip(np.where(dd > 0, u, 0.0), 0.0, 1.0)
+        fix = np.zeros((len(bad), 3))
+        fix[np.arange(len(bad)), i] = 1 - u
+        fix[np.arange(len(bad)), j] += u
+        bary[bad] = fix
+    return bary
 
 
 @numba.njit(cache=True, nogil=True)

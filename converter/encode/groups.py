@@ -33,6 +33,10 @@ a frame where both are drawn), greedily continuing the current band, which merge
 wraps only the runs whose saved keys outweigh the text of their transform stack, and leaves the others in the
 head's frame. When even the head group does not pay for itself, nothing is grouped.
 
+Degenerate motion: a band whose played transform shrinks some direction below MIN_SCALE in some frame (a part
+scaled to zero by its joint, collapsed to a line, or fitted to nothing) has no usable inverse, so its runs are
+never wrapped and its paths are keyed in the head's frame; a degenerate head is no head transform (identity).
+
 This module knows numbers and error budgets only: ``plan`` returns which runs to wrap and the played transforms,
 and the writer (converter.writers.svg_transforms) writes the markup. What text costs, the writer tells it
 through ``Costs``.
@@ -82,6 +86,10 @@ PLAIN_MARGIN = 0.25  # on every 4th when the first estimate is within this share
 PLAN_SHARES = (0.3, 0.75)  # where plan's layout ends and its decision ends, as fractions of its time (wall, the
 # capture-like face, 8k x 1,000 and the ICT head x 1,000: layout 0.25-0.37, decision 0.40-0.48, refining 0.23-0.27)
 TIME_DECIMALS = 4  # keyTimes of the transform animations are played (and so written) rounded to these decimals
+# A played transform shrinking some direction below this (viewport px per local px) in a frame is degenerate: its
+# inverse would blow local coordinates up past the float error budget (and is singular at 0). The goldens' and the
+# rigid tests' bands stay above 0.1.
+MIN_SCALE = 0.05
 
 
 class TransformAnim(NamedTuple):
@@ -409,8 +417,30 @@ def band_motion(params: np.ndarray, center: np.ndarray, radius: float, slack: fl
     return BandMotion(np.asarray(center, np.float64), tuple(anims), mats, gain, kt_decimals)
 
 
+def invertible(mats: np.ndarray) -> bool:
+    """Whether played transforms mats (T, 2, 3) are finite and keep every direction at least MIN_SCALE long in
+    every frame (the smaller singular value of each linear part), so that local coordinates stay bounded."""
+    if not np.isfinite(mats).all():
+        return False
+    lin = mats[:, :, :2].reshape(-1, 4)
+    det = np.abs(lin[:, 0] * lin[:, 3] - lin[:, 1] * lin[:, 2])
+    sq = np.einsum("ti,ti->t", lin, lin)  # s_max^2 + s_min^2; and s_max s_min = |det|
+    s_max = np.sqrt((sq + np.sqrt(np.maximum(sq * sq - 4 * det * det, 0.0))) / 2)
+    return bool(((det > 0) & (det >= MIN_SCALE * s_max)).all())  # s_min = det / s_max >= MIN_SCALE
+
+
+def identity_motion(t: int, kt_decimals: int = TIME_DECIMALS) -> BandMotion:
+    """No transform over t frames: local px are viewport px (what a degenerate head falls back to)."""
+    mats = np.zeros((t, 2, 3))
+    mats[:, 0, 0] = mats[:, 1, 1] = 1.0
+    return BandMotion(np.zeros(2), (), mats, 1.0, kt_decimals)
+
+
 def local_tracks(xy_paths: np.ndarray, mats: np.ndarray) -> np.ndarray:
-    """Path vertices (T, P, 3, 2) px -> local px of one band's played transforms mats (T, 2, 3)."""
+    """Path vertices (T, P, 3, 2) px -> local px of one band's played transforms mats (T, 2, 3), which must be
+    ``invertible`` (the planner never wraps a path in a degenerate band's group)."""
+    if not invertible(mats):
+        raise ValueError("local tracks of a degenerate transform (a frame's linear part is singular or nearly so)")
     return apply_linear(np.linalg.inv(mats[:, :, :2]), xy_paths - mats[:, None, None, :, 2])
 
 
@@ -451,6 +481,8 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
     ids, sizes = np.unique(merged, return_counts=True)
     head = _motion(xy64, unique_ints(faces[merged == ids[np.argmax(sizes)]]), neutral, HEAD_SHARE * tolerance,
                    scale, kt_decimals)
+    if not invertible(head.matrices):  # e.g. the skin scaled to nothing in a frame: no head transform
+        head = identity_motion(t, kt_decimals)
     # local_tracks, worked in xy64's place a block of frames at a time (xy64 is not needed after this): a second
     # (T, V, 2) float64 array is fresh pages for the kernel to zero (with motion_clusters' blocks, the system CPU
     # of layout, apply_linear and motion_clusters went 3.3 -> 1.7 s on the 128k-triangle bench face)
@@ -551,6 +583,7 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     r_local = budget.local_keys(lay.gain)
     r_head = float(budget.local_keys(np.array([lay.head.gain]))[0])
     ok = r_local > 0.05 * global_radius  # a band that magnifies errors too much is not worth it
+    ok &= np.array([invertible(m.matrices) for m in lay.motions], bool)[lay.band]  # degenerate bands: never wrapped
 
     def keys_of(x, r, cols, limit=None):
         # Squares only: which paths to wrap is decided on these; the other shapes refine the chosen tracks below.

@@ -5,6 +5,8 @@ in either order without changing a pixel. ``overlap_pairs`` finds the others: ca
 bounding boxes per block of frames, then an exact test per candidate and frame (boxes, then a separating-axis
 test on the two triangles). The exact test stops at the first frame where a pair meets; that early exit is a
 loop numpy cannot express, so it is compiled with numba. Arithmetic is float32, as the positions are stored.
+A box over more than BIG_CELLS cells (a part blown up on screen, a vertex near the eye plane) is tested against
+every other box directly instead: on the grid it would take an entry per cell it covers, billions of them.
 """
 
 from __future__ import annotations
@@ -30,6 +32,8 @@ EMPTY = -1  # a free slot of a PairSet's table
 PAIRSET_BITS = 12  # a PairSet starts with 2^12 slots (64 KB) and grows when half full
 TILE = 8  # a PairSet keeps the pairs of TILE x TILE paths in one 64-bit word
 SLOT_GROUP = 2  # ... and the 2^2 tiles of a row whose numbers differ in their low 2 bits in one 64-byte line
+BIG_CELLS = 4096  # a box over more cells than this is tested against every box directly, not through the grid
+BIG_CHUNK = 256  # ... that many big boxes at a time (a (chunk, boxes) temporary)
 
 
 # The compiled helpers address a triangle as (pts, frame, path), never as a slice, and are inlined: a slice or an
@@ -482,18 +486,66 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = 
         del seen
         cell = max(CELL_BOXES * float(np.median((hi - lo).max(axis=1))), 1.0)
         own_band = band[idx] if band is not None else np.arange(len(idx))  # most neighbours share a band
+        # Boxes over more than BIG_CELLS cells (a part blown up, a vertex near the eye plane) would take a grid entry
+        # per cell (billions): they are paired with every box they meet directly instead, the others on the grid.
+        small = np.flatnonzero(_cells_covered(lo, hi, cell) <= BIG_CELLS)
+        if len(small) < len(idx):
+            la, lb = _big_candidates(lo, hi, own_band, small, found, idx)
+            _test(found, pts, on, idx, la, lb, m32)
+            if len(small) < 2:
+                continue
+        else:
+            small = None
         # Only pairs not found in an earlier block come back, to be tested. The cells are shared among the threads
         # (a slice of the entries each, each with a buffer of its own).
-        cells = _cell_lists(lo, hi, cell, own_band)
+        cells = (_cell_lists(lo, hi, cell, own_band) if small is None
+                 else _cell_lists(lo[small], hi[small], cell, own_band[small]))
+        ids = idx if small is None else idx[small]
         parts = parallel.slices(len(cells[0]))
         buffers += [np.empty((p // len(parts) + 1, 2), np.int64) for _ in range(len(parts) - len(buffers))]
-        got = parallel.run([partial(_candidates, *cells, idx, found.table, found.shift, found.tiles, buffers[i], a, b)
+        got = parallel.run([partial(_candidates, *cells, ids, found.table, found.shift, found.tiles, buffers[i], a, b)
                             for i, (a, b) in enumerate(parts)])
         buffers[:len(got)] = [buf for buf, _ in got]
         for buf, m in got:  # each slice's candidates tested where they lie (no joined copy)
             la, lb = buf[:m, 0], buf[:m, 1]
-            meet = np.zeros(m, bool)
-            if m:
-                parallel.threaded(_meet, m, pts, on, la, lb, m32, meet)
-            found.add(idx[la[meet]], idx[lb[meet]])
+            if small is not None:  # boxes of the grid -> the block's paths
+                la, lb = small[la], small[lb]
+            _test(found, pts, on, idx, la, lb, m32)
     return found.pairs(order)
+
+
+def _test(found: PairSet, pts: np.ndarray, on: np.ndarray, idx: np.ndarray, la: np.ndarray, lb: np.ndarray,
+          margin: np.float32) -> None:
+    """Add to found the candidates (la[c] < lb[c], the block's paths idx) that come within margin in a frame of
+    the block (pts, on) where both are drawn."""
+    meet = np.zeros(len(la), bool)
+    if len(la):
+        parallel.threaded(_meet, len(la), pts, on, la, lb, margin, meet)
+    found.add(idx[la[meet]], idx[lb[meet]])
+
+
+def _cells_covered(lo: np.ndarray, hi: np.ndarray, cell: float) -> np.ndarray:
+    """Per box [lo, hi] (N, 2), how many cells of side cell it covers (float64: it may be astronomical)."""
+    span = np.floor(np.asarray(hi, np.float64) / cell) - np.floor(np.asarray(lo, np.float64) / cell) + 1
+    return span[:, 0] * span[:, 1]
+
+
+def _big_candidates(lo: np.ndarray, hi: np.ndarray, band: np.ndarray, small: np.ndarray, found: PairSet,
+                    idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Candidate pairs (la < lb) with at least one box not in small: boxes that meet, of different bands, whose
+    paths (idx) are not yet in found; what the grid would give for them, by direct box tests."""
+    n = len(lo)
+    big = np.setdiff1d(np.arange(n), small)
+    out_a, out_b = [], []
+    for s in range(0, len(big), BIG_CHUNK):
+        b = big[s:s + BIG_CHUNK]
+        meet = ((np.maximum(lo[b, None, 0], lo[None, :, 0]) <= np.minimum(hi[b, None, 0], hi[None, :, 0]))
+                & (np.maximum(lo[b, None, 1], lo[None, :, 1]) <= np.minimum(hi[b, None, 1], hi[None, :, 1]))
+                & (band[b, None] != band[None, :]))
+        meet[:, big] &= big[None, :] > b[:, None]  # two big boxes: once, in the row of the first
+        i, j = np.nonzero(meet)
+        out_a.append(np.minimum(b[i], j))
+        out_b.append(np.maximum(b[i], j))
+    la, lb = (np.concatenate(out_a), np.concatenate(out_b)) if out_a else (np.zeros(0, np.int64),) * 2
+    new = ~found.has(idx[la], idx[lb]) if len(la) else np.zeros(0, bool)
+    return la[new], lb[new]

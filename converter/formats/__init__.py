@@ -7,7 +7,7 @@ import json
 from collections.abc import Callable
 from pathlib import Path
 
-from converter.animation import FaceAnimation
+from converter.animation import FaceAnimation, NonFinitePositions
 from converter.errors import InputError
 from converter.formats import gltf, objseq, ply, pointcache
 from converter.formats.weights import is_capture
@@ -95,7 +95,11 @@ def check_gltf_document(data: bytes, name: str) -> None:
 def load(path: str | Path, fps: float | None = None, cache: str | Path | None = None,
          animation: str | None = None) -> FaceAnimation:
     """Read any supported input file into a FaceAnimation (resampled to fps; animation picks a glTF clip)."""
-    anim = _load(Path(path), fps, cache, animation)
+    try:
+        anim = _load(Path(path), fps, cache, animation)
+    except NonFinitePositions as exc:  # raised where the frames are made: name the file(s) they came from
+        names = Path(path).name + (f" with {Path(cache).name}" if cache is not None else "")
+        raise InputError(f"{names}: {exc}") from None
     anim.extras.setdefault("source_path", str(path))  # lets 3D stages find side files such as NAME.fdp.json
     return anim
 
