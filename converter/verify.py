@@ -546,6 +546,22 @@ def _svg_paths(root: etree._Element, meta: dict,
         yield np.array(ids, np.int64), xy, vis[:, None] & ~point, vis[:, None] & point
 
 
+def _corners_aligned(xy: np.ndarray, exact: np.ndarray, shown: np.ndarray) -> np.ndarray:
+    """xy (T, n, 3, 2) with each path's corners cyclically rotated to fit exact's where it is shown largest (the
+    turn is plain there, beyond the tolerance): a path may start at any corner (the flat writer starts an open
+    path after the edge its stroke leaves out)."""
+    size = np.where(shown, lengths(exact - np.roll(exact, 1, axis=2)).min(axis=2), -1.0)
+    first = np.argmax(np.nan_to_num(size, nan=-1.0), axis=0)  # (n,)
+    cols = np.arange(xy.shape[1])
+    at, want = xy[first, cols], exact[first, cols]  # (n, 3, 2)
+    err = np.stack([lengths(np.roll(at, -r, axis=1) - want).max(axis=1) for r in range(3)])
+    turn = np.argmin(np.where(np.isnan(err), np.inf, err), axis=0)
+    if not turn.any():
+        return xy
+    idx = (np.arange(3)[None] + turn[:, None]) % 3  # (n, 3)
+    return np.take_along_axis(xy, np.broadcast_to(idx[None, :, :, None], xy.shape), axis=2)
+
+
 class _Tally:
     """compare's figures, gathered a block of paths at a time: the (T, P, 3, 2) positions of every path at once
     were most of a long job's memory (8k triangles x 3,000 frames: 5 GB of the web job's 5.1 GB peak)."""
@@ -561,7 +577,8 @@ class _Tally:
         """The next paths: triangle ids tris (n,), positions xy (T, n, 3, 2), shown and collapsed (T, n)."""
         if tris.max() >= len(self.faces):
             raise InputError("the SVG names triangles the input does not have; pass the input it was made from.")
-        dist = lengths(xy - np.take(self.exact, self.faces[tris], axis=1))  # (T, n, 3)
+        exact = np.take(self.exact, self.faces[tris], axis=1)
+        dist = lengths(_corners_aligned(xy, exact, shown) - exact)  # (T, n, 3)
         dist = np.where(np.isnan(dist), np.inf, dist)
         if collapsed is not None:  # a visible triangle smaller than the tolerance may be drawn as its point
             small = collapsed & np.take(self.expected, tris, axis=1) & (dist <= self.tolerance).all(axis=-1)

@@ -44,14 +44,17 @@ from converter.encode.tracks import Tracks, blocks
 from converter.errors import InputError
 from converter.options import ConversionOptions, Progress, Report, no_progress, span
 from converter.sheet import Sheet
-from converter.writers import svgtext
+from converter.writers import seams, svgtext
 from converter.writers.metadata import source_fields
 from converter.writers.svg_transforms import CLOSE, group_open
 from converter.writers.svgtext import key_times
 from converter.writers.svgtext import number as svg_number
 
 FORMAT_VERSION = 2
-STROKE_PX = 0.5  # stroke of the fill colour hides anti-aliasing seams between neighbours
+# Stroke of the fill colour over interior edges (seams.py): hides the anti-aliasing seams between neighbours. One
+# side strokes a shared edge, so it is wider than the 0.5 px both sides drew when every edge was stroked: the egg
+# of tests/writers/test_seams.py shows less page through its seams than then, and outlines do not grow.
+STROKE_PX = 0.6
 COLOR_TIME_LEVELS = 0.1  # of which rounding the colour keyTimes may take
 BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime): what groups weigh
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
@@ -126,11 +129,62 @@ def _header(sheet: Sheet, scale: int) -> str:
     return f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w * scale} {h * scale}" width="{w}" height="{h}">'
 
 
-def _style(palette: np.ndarray, scale: int) -> str:
+def _style(palette: np.ndarray, scale: int, bare: bool = False) -> str:
+    """The stylesheet: fill and seam stroke in currentColor, a class per colour, and with bare the class 'n' of
+    unstroked paths (seams.py)."""
     rules = "".join(f".c{i}{{color:{c}}}" for i, c in enumerate(_hex(palette).tolist()))
     sw = svg_number(STROKE_PX * scale, 3)
-    return (f"<style>path{{fill:currentColor;stroke:currentColor;stroke-width:{sw};stroke-linejoin:round}}"
-            f"{rules}</style>")
+    return (f"<style>path{{fill:currentColor;stroke:currentColor;stroke-width:{sw};stroke-linejoin:round;"
+            f"stroke-linecap:round}}{rules}{'.n{stroke:none}' if bare else ''}</style>")
+
+
+class Strokes:
+    """The seam strokes of a writer's paths (seams.py), looked up by triangle id: each triangle is drawn by one
+    path (layer copies are never left open), so its corner order, 'z' and stroke follow it through every
+    reordering of the paths."""
+
+    def __init__(self, faces: np.ndarray, tris: np.ndarray, skip: np.ndarray, single: np.ndarray) -> None:
+        n = len(faces)
+        self.faces = np.array(faces, np.int32)
+        self.start_of = np.zeros((2, n), np.int64)  # as laid out, and with a stroke (at most one edge out)
+        self.closed_of = np.ones((2, n), bool)
+        self.bare_of = np.zeros(n, bool)
+        for k, s in enumerate((seams.layout(skip), seams.layout(single))):
+            self.start_of[k, tris], self.closed_of[k, tris] = s.start, s.closed
+            if k == 0:
+                self.bare_of[tris] = ~s.stroked
+        rows = np.take_along_axis(self.faces[tris], (self.start_of[0, tris, None] + np.arange(3)) % 3, axis=1)
+        self.faces[tris] = rows  # each path's corners from the one written first: its skipped edge closes it
+
+    def closed(self, tris: np.ndarray) -> np.ndarray:
+        """Bool per path of triangles tris: its d ends with 'z'."""
+        return self.closed_of[0, tris]
+
+    def bare(self, tris: np.ndarray) -> np.ndarray:
+        """Bool per path of triangles tris: it has no stroke."""
+        return self.bare_of[tris]
+
+    def stroke(self, tris: np.ndarray) -> np.ndarray:
+        """Give the unstroked of triangles tris a stroke (a merged element has one for all its subpaths): returns
+        per triangle the turn (0-2) its corners take from the order laid out before."""
+        tris = np.asarray(tris)
+        turn = (self.start_of[1, tris] - self.start_of[0, tris]) % 3
+        self.faces[tris] = np.take_along_axis(self.faces[tris], (turn[:, None] + np.arange(3)) % 3, axis=1)
+        self.start_of[0, tris], self.closed_of[0, tris] = self.start_of[1, tris], self.closed_of[1, tris]
+        self.bare_of[tris] = False
+        return turn
+
+
+def strokes(sheet: Sheet, tris: np.ndarray, active: np.ndarray, frames: slice = slice(None)) -> Strokes:
+    """The seam strokes of paths drawing triangles tris where active (T, P) over the sheet's frames (a slice of
+    them for a still)."""
+    welded = seams.welded_ids(sheet.xy[frames], sheet.depth[frames])
+    skip, single = seams.skips(welded[sheet.faces[tris]], active, sheet.xy[frames], sheet.faces[tris], STROKE_PX / 2)
+    tris = np.asarray(tris)
+    _, first, counts = np.unique(tris, return_index=True, return_counts=True)
+    copies = np.isin(tris, tris[first[counts > 1]])  # layer copies: closed and stroked, as before
+    skip[copies] = single[copies] = False
+    return Strokes(sheet.faces, tris, skip, single)
 
 
 def write_still(sheet: Sheet, options: ConversionOptions, report: Report, frame: int) -> bytes:
@@ -141,18 +195,22 @@ def write_still(sheet: Sheet, options: ConversionOptions, report: Report, frame:
     tris = sheet.order[sheet.visible[frame, sheet.order]]
     levels = np.clip(np.rint(sheet.face_rgb[frame, sheet.color_columns(tris)] * 255), 0, 255).astype(np.int64)
     palette, cls = np.unique(levels, axis=0, return_inverse=True)
-    q = np.rint(sheet.xy[frame][sheet.faces[tris]].reshape(-1, 6).astype(np.float64) * scale).astype(np.int64)
-    d = _path_strings(q)
+    st = strokes(sheet, tris, np.ones((1, len(tris)), bool), slice(frame, frame + 1))  # this frame's outline
+    q = np.rint(sheet.xy[frame][st.faces[tris]].reshape(-1, 6).astype(np.float64) * scale).astype(np.int64)
+    d = _path_strings(q, closed=st.closed(tris))
+    bare = st.bare(tris)
     out = [_header(sheet, scale), metadata(sheet, options, report, {"encoding": {"mode": "still", "scale": scale,
                                                                            "frame": frame}}, order=tris),
-           f"<title>{escape(sheet.name)}</title>", _style(palette, scale), "<g>"]
-    out += [f'<path id="f{t}" class="c{c}" d="{s}"/>' for t, c, s in zip(tris.tolist(), cls.reshape(-1).tolist(), d)]
+           f"<title>{escape(sheet.name)}</title>", _style(palette, scale, bool(bare.any())), "<g>"]
+    out += [f'<path id="f{t}" class="c{c}{" n" if b else ""}" d="{s}"/>'
+            for t, c, b, s in zip(tris.tolist(), cls.reshape(-1).tolist(), bare.tolist(), d)]
     out.append("</g></svg>\n")
     return "\n".join(out).encode("utf-8")
 
 
-def _path_strings(q: np.ndarray, offset: np.ndarray | None = None) -> list[str]:
-    """Shortest relative syntax 'm x y dx dy dx dy z' for integer triangles (N, 6), less offset (N, 2).
+def _path_strings(q: np.ndarray, offset: np.ndarray | None = None, closed: np.ndarray | None = None) -> list[str]:
+    """Shortest relative syntax 'm x y dx dy dx dy z' for integer triangles (N, 6), less offset (N, 2); without
+    the 'z' where not closed (N,) (an open path: its stroke leaves out the closing edge).
 
     A leading 'm' is absolute and the pairs after it are implicit relative linetos, so no 'l' is needed."""
     r = q.copy()
@@ -160,7 +218,7 @@ def _path_strings(q: np.ndarray, offset: np.ndarray | None = None) -> list[str]:
     r[:, 4:6] = q[:, 4:6] - q[:, 2:4]
     if offset is not None:
         r[:, 0:2] -= offset
-    return svgtext.subpaths(r)
+    return svgtext.subpaths(r, closed)
 
 
 def _digits(v: np.ndarray) -> np.ndarray:
@@ -188,8 +246,9 @@ def offsets(rows: np.ndarray, pk: np.ndarray, p: int) -> np.ndarray:
     return out
 
 
-def _raw_strings(tri_xy: np.ndarray) -> list[str]:
-    """The chapter's 'M x,y L x,y L x,y Z' with 2 decimals, (N, 6) px -> N strings (one format call)."""
+def _raw_strings(tri_xy: np.ndarray, closed: bool = True) -> list[str]:
+    """The chapter's 'M x,y L x,y L x,y Z' with 2 decimals, (N, 6) px -> N strings (one format call); without
+    the 'Z' when not closed."""
     c = np.rint(np.asarray(tri_xy, np.float64) * 100).astype(np.int64)
     if not len(c):
         return []
@@ -198,8 +257,18 @@ def _raw_strings(tri_xy: np.ndarray) -> list[str]:
     fields[..., 0] = np.where(c < 0, "-", "")
     fields[..., 1] = a // 100
     fields[..., 2] = a % 100
-    one = "M%s%d.%02d,%s%d.%02dL%s%d.%02d,%s%d.%02dL%s%d.%02d,%s%d.%02dZ\x00"
+    one = "M%s%d.%02d,%s%d.%02dL%s%d.%02d,%s%d.%02dL%s%d.%02d,%s%d.%02d" + ("Z\x00" if closed else "\x00")
     return ((one * len(c)) % tuple(fields.ravel().tolist()))[:-1].split("\x00")
+
+
+def _raw_texts(tri_xy: np.ndarray, closed: np.ndarray) -> list[str]:
+    """_raw_strings of each row (N, 6), closed (N,) or open."""
+    out = np.empty(len(tri_xy), object)
+    for shut in (True, False):
+        sel = np.flatnonzero(closed == shut)
+        if len(sel):
+            out[sel] = np.asarray(_raw_strings(tri_xy[sel], shut), object)
+    return out.tolist()
 
 
 def color_keys(rgb: np.ndarray, active: np.ndarray, tolerance: float) -> keyframes.Keys:
@@ -307,11 +376,14 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     if mode == "bounded":  # the raw file's d values alone, counted exactly (writing them would cost more)
         report.sizes["raw_d_values"] = raw_values_bytes(sheet.xy, sheet.faces[tris])
     budget = ErrorBudget.split(options.tolerance, max(sheet.camera.width, sheet.camera.height))
+    merging = mode == "bounded" and options.max_animations is not None and p > options.max_animations
+    st = strokes(sheet, tris, active)
+    faces = st.faces  # each path's corners from the one its d starts at
     plan = None
     keys_from = ORDER_DONE  # progress of the writing where the plain keys start, when they are worked out
     if mode == "bounded" and options.rigid and p:
         costs = groups.Costs(lambda m: len(group_open(m, t, dur)), len(CLOSE), BYTES_PER_KEY)
-        plan = groups.plan(sheet.xy, sheet.faces, sheet.part_ids, sheet.neutral, tris, active, budget, costs,
+        plan = groups.plan(sheet.xy, faces, sheet.part_ids, sheet.neutral, tris, active, budget, costs,
                            progress=span(progress, ORDER_DONE, KEYS_DONE))
         heap.give_back()  # the plan's temporaries, before the text's
         if plan.head is not None:  # else nothing pays for a group: the plain encoding, byte for byte
@@ -320,12 +392,13 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
             plan = None
             keys_from = ORDER_DONE + (KEYS_DONE - ORDER_DONE) * groups.PLAN_SHARES[1]
     if plan is None:  # the Sheet's float32 vertices, read a block of paths at a time
-        track = Tracks.screen(sheet.xy, sheet.faces[tris])
+        track = Tracks.screen(sheet.xy, faces[tris])
     joined = None
-    if mode == "bounded" and options.max_animations is not None and p > options.max_animations:
-        joined, tris, active, track, plan = _merge_plan(sheet, tris, active, track, plan, options)
+    if merging:
+        joined, tris, active, track, plan = _merge_plan(sheet, faces, tris, active, track, plan, options)
+        track = _stroke_merged(st, joined, tris, track)
     if mode in ("raw", "chapter"):
-        body = _encode_raw(sheet, tris, active, track, dur, chapter=mode == "chapter",
+        body = _encode_raw(sheet, tris, active, track, dur, chapter=mode == "chapter", strokes=st,
                            progress=span(progress, ORDER_DONE, 1.0))
         scale = 1
     else:
@@ -333,7 +406,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
         del track  # _encode_keyed lets the track go once the geometry is written
         if plan is not None:  # its keys live on only in the timeline, its track in owned
             plan = plan._replace(timeline=None, track=None)
-        body, scale, enc = _encode_keyed(sheet, budget, tris, active, owned, dur, report, plan,
+        body, scale, enc = _encode_keyed(sheet, budget, tris, active, owned, dur, report, st, plan,
                                          options.color_tolerance, joined, span(progress, KEYS_DONE, 1.0, "text"))
         extra["encoding"].update(enc)
     head = [_header(sheet, scale), metadata(sheet, options, report, extra, order=tris),
@@ -351,16 +424,17 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     return text.encode("utf-8")
 
 
-def _merge_plan(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: Tracks, plan: groups.Plan | None,
-                options: ConversionOptions):
-    """converter.encode.merge's sets for the paths, and the paths, their tracks and the plan in its order."""
+def _merge_plan(sheet: Sheet, faces: np.ndarray, tris: np.ndarray, active: np.ndarray, track: Tracks,
+                plan: groups.Plan | None, options: ConversionOptions):
+    """converter.encode.merge's sets for the paths (triangles tris of faces), and the paths, their tracks and the
+    plan in its order."""
     segment = np.zeros(len(tris), np.int64)
     if plan is not None:  # a set never crosses the edge of a group
         edge = np.zeros(len(tris) + 1, np.int64)
         edge[plan.groups.ravel()] = 1
         segment = np.cumsum(edge[:-1])
     joined = merge.plan(segment, sheet.face_colors(tris), active, options.color_tolerance,
-                        np.take(sheet.xy, sheet.faces[tris], axis=1), options.max_animations)
+                        np.take(sheet.xy, faces[tris], axis=1), options.max_animations)
     o = joined.order
     if plan is not None:
         plan = plan._replace(track=plan.track.reorder(o), radius=plan.radius[o], band=plan.band[o],
@@ -371,8 +445,23 @@ def _merge_plan(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: Track
     return joined, tris[o], np.take(active, o, axis=1), track, plan
 
 
+def _stroke_merged(st: Strokes, joined: merge.Merge, tris: np.ndarray, track: Tracks) -> Tracks:
+    """An element of several subpaths has one stroke: its unstroked paths (st) get one (their corners turned so
+    the one edge they leave out closes them), in track as well (the merged keys are worked out from it)."""
+    counts = np.diff(joined.starts)
+    inside = np.flatnonzero(np.repeat(counts > 1, counts))
+    fix = inside[st.bare(tris[inside])]
+    if not len(fix):
+        return track
+    turn = st.stroke(tris[fix])
+    corners = np.array(track.corners)
+    corners[fix] = np.take_along_axis(corners[fix], (turn[:, None] + np.arange(3)) % 3, axis=1)
+    return Tracks(track.verts, corners)
+
+
 def _merged_geometry(track: Tracks, active: np.ndarray, radius: np.ndarray, gain: np.ndarray,
-                     sets: list[tuple[int, int]], budget: ErrorBudget, dur: str) -> tuple[list[str], list[str], int]:
+                     sets: list[tuple[int, int]], budget: ErrorBudget, dur: str,
+                     closed: np.ndarray | None = None) -> tuple[list[str], list[str], int]:
     """Per merged set (first, one-past-last path) its <animate> of d and frame-0 d: one subpath per path, every
     point keyed together (free knots within the set's radius wherever any of its paths shows), each path
     collapsed where it hides; a path's values at the keys the others add lie on its own interpolant, so every
@@ -382,7 +471,7 @@ def _merged_geometry(track: Tracks, active: np.ndarray, radius: np.ndarray, gain
     band = np.ceil(np.log2([b - a for a, b in sets])).astype(np.int64)
     for w in np.unique(band).tolist():
         ks = np.flatnonzero(band == w)
-        a_, f_, n = _merged_band(track, active, radius, gain, [sets[k] for k in ks.tolist()], budget, dur)
+        a_, f_, n = _merged_band(track, active, radius, gain, [sets[k] for k in ks.tolist()], budget, dur, closed)
         for k, a, f in zip(ks.tolist(), a_, f_):
             anims[k], firsts[k] = a, f
         n_keys += n
@@ -390,10 +479,12 @@ def _merged_geometry(track: Tracks, active: np.ndarray, radius: np.ndarray, gain
 
 
 def _merged_band(track: Tracks, active: np.ndarray, radius: np.ndarray, gain: np.ndarray,
-                 sets: list[tuple[int, int]], budget: ErrorBudget, dur: str) -> tuple[list[str], list[str], int]:
+                 sets: list[tuple[int, int]], budget: ErrorBudget, dur: str,
+                 closed: np.ndarray | None = None) -> tuple[list[str], list[str], int]:
     """_merged_geometry of sets keyed together, each padded to the largest (its last path repeated: the same
-    bound twice, no other key)."""
+    bound twice, no other key); closed (P,): a path's subpath ends with 'z' (else it is open; default: all closed)."""
     t = active.shape[0]
+    closed = np.ones(active.shape[1], bool) if closed is None else closed
     scale = budget.scale
     width = max(b - a for a, b in sets)
     idx = np.array([[min(a + i, b - 1) for i in range(width)] for a, b in sets], np.int64)  # (Q, M) padded
@@ -439,9 +530,12 @@ def _merged_band(track: Tracks, active: np.ndarray, radius: np.ndarray, gain: np
     for k, (a, b) in enumerate(sets):
         n = b - a
         r = rows[kb[k]:kb[k + 1], :n * 6].reshape(-1, 6)
+        shut = closed[a:b]
         off = np.zeros((len(r), 2), np.int64)
-        off.reshape(-1, n, 2)[:, 1:] = r.reshape(-1, n, 6)[:, :-1, :2]  # a moveto after z is relative to the
-        parts = _path_strings(r, off)  # start of the subpath before
+        # a moveto after z is relative to the start of the subpath before, after an open one to its last point
+        before = np.where(shut[:-1, None], r.reshape(-1, n, 6)[:, :-1, :2], r.reshape(-1, n, 6)[:, :-1, 4:6])
+        off.reshape(-1, n, 2)[:, 1:] = before
+        parts = _path_strings(r, off, np.tile(shut, len(r) // n))
         text = ["".join(parts[i:i + n]) for i in range(0, len(parts), n)]
         firsts.append(text[0])
         moving = len(set(text)) > 1
@@ -471,31 +565,35 @@ def raw_values_bytes(xy: np.ndarray, corners: np.ndarray) -> int:
 
 
 def _encode_raw(sheet: Sheet, tris: np.ndarray, active: np.ndarray, track: Tracks, dur: str,
-                chapter: bool = False, progress: Progress = no_progress) -> list[bytes]:
+                chapter: bool = False, strokes: Strokes | None = None, progress: Progress = no_progress) -> list[bytes]:
     """The raw file: every frame's coordinates (2 decimals) as evenly spaced values (frame k at k/T, the last
     held to T); fill, stroke and display as discrete animations where they change. With chapter=True the
     chapter's post-optimisations: coordinates only at frames that need them (nothing while hidden, a still
-    run reduced to its two ends) placed with keyTimes, exact to 2 decimals. Written RAW_WRITE_PATHS paths at a
-    time, each block's lines joined into bytes at once, so the texts of every frame of every path never exist
-    at once as strings (memory follows the output)."""
+    run reduced to its two ends) placed with keyTimes, exact to 2 decimals. Seam strokes as strokes says (open
+    paths without 'Z', unstroked ones without stroke; default: every edge stroked). Written RAW_WRITE_PATHS paths
+    at a time, each block's lines joined into bytes at once, so the texts of every frame of every path never
+    exist at once as strings (memory follows the output)."""
     t, p = active.shape
     kt = key_times(np.arange(t + 1), t, 6, "early")
     kt_lin = key_times(np.arange(t + 1), t, 6) if chapter else []
-    out = [b'<g stroke-width="0.5" stroke-linejoin="round">']
+    out = [f'<g stroke-width="{svg_number(STROKE_PX, 3)}" stroke-linejoin="round" stroke-linecap="round">'.encode()]
     ids = path_ids(tris)
     columns = sheet.color_columns(tris)
     for a in range(0, p, RAW_WRITE_PATHS):
         progress("text", a / p)
         sl = slice(a, a + RAW_WRITE_PATHS)
+        closed = strokes.closed(tris[sl]) if strokes is not None else np.ones(len(tris[sl]), bool)
+        bare = strokes.bare(tris[sl]) if strokes is not None else np.zeros(len(tris[sl]), bool)
         lines = _raw_block(np.take(sheet.face_rgb, columns[sl], axis=1), active[:, sl], track.take(sl), ids[sl], kt,
-                           kt_lin, dur, chapter)
+                           kt_lin, dur, chapter, closed, bare)
         out.append("\n".join(lines).encode("utf-8"))
     return out
 
 
 def _raw_block(rgb: np.ndarray, active: np.ndarray, track: np.ndarray, ids: list[str], kt: list[str],
-               kt_lin: list[str], dur: str, chapter: bool) -> list[str]:
-    """_encode_raw's paths for one block: colours rgb (T, P, 3), active (T, P), tracks (T, P, 6) px."""
+               kt_lin: list[str], dur: str, chapter: bool, closed: np.ndarray, bare: np.ndarray) -> list[str]:
+    """_encode_raw's paths for one block: colours rgb (T, P, 3), active (T, P), tracks (T, P, 6) px; closed and
+    bare (P,): the d ends with 'Z', the path has no stroke."""
     t, p = active.shape
     track = np.asarray(track, np.float64)
     levels = np.clip(np.round(np.asarray(rgb) * 255), 0, 255).astype(np.int64)
@@ -506,11 +604,11 @@ def _raw_block(rgb: np.ndarray, active: np.ndarray, track: np.ndarray, ids: list
     vis = _discrete("display", active.astype(np.int64), ["none", "inline"], kt, dur)
     fills = _discrete("fill", fill_codes, names, kt, dur)
     strokes = [a.replace('"fill"', '"stroke"', 1) for a in fills]
-    raw = _raw_strings(track.reshape(-1, 6))
+    raw = _raw_texts(track.reshape(-1, 6), np.tile(closed, t))
     if chapter:
         keys = keyframes.reduce(np.rint(track * 100), active, 1e-6)  # exact in hundredths of a pixel
         pk, fk = np.nonzero(keys.mask.T)
-        text = _raw_strings(keys.values.transpose(1, 0, 2)[pk, fk] / 100.0)
+        text = _raw_texts(keys.values.transpose(1, 0, 2)[pk, fk] / 100.0, closed[pk])
         bounds = np.searchsorted(pk, np.arange(p + 1)).tolist()
         moving = _varying(pk, p, keys.values.transpose(1, 0, 2)[pk, fk])
         fkl = fk.tolist()
@@ -529,10 +627,10 @@ def _raw_block(rgb: np.ndarray, active: np.ndarray, track: np.ndarray, ids: list
             anim = (f'<animate attributeName="d" dur="{dur}" repeatCount="indefinite" values="{";".join(vals)}"/>'
                     if t > 1 else "")
         colour = names[fill_codes[0, j]]
-        attrs = f'id="{ids[j]}" d="{first}" fill="{colour}" stroke="{colour}"'
+        attrs = f'id="{ids[j]}" d="{first}" fill="{colour}"' + ("" if bare[j] else f' stroke="{colour}"')
         if not active[0, j]:
             attrs += ' display="none"'  # not visibility: Inkscape draws visibility:hidden paths
-        out.append(f"<path {attrs}>{anim}{vis[j]}{fills[j]}{strokes[j]}</path>")
+        out.append(f"<path {attrs}>{anim}{vis[j]}{fills[j]}{'' if bare[j] else strokes[j]}</path>")
     return out
 
 
@@ -663,12 +761,14 @@ def _timeline(track: Tracks, active: np.ndarray, budget: ErrorBudget,
 
 
 def _d_animations(tl: collapse.Timeline, p: int, t: int, gain: np.ndarray | None, view_scale: int,
-                  time_budget: float, dur: str) -> tuple[list[str], list[str], int, np.ndarray, np.ndarray,
-                                                      np.ndarray, np.ndarray, list[int]]:
+                  time_budget: float, dur: str, closed: np.ndarray) -> tuple[list[str], list[str], int, np.ndarray,
+                                                                             np.ndarray, np.ndarray, np.ndarray,
+                                                                             list[int]]:
     """The d <animate> of each of p paths from its keys tl (gain (P,): error gain of each path's group, None for
-    none): animations, frame-0 d texts, keys written, moving (P,), static offsets (P, 2), keys (P,), mean key
-    text length (P,) and the [least, most] keyTime decimals. A block of paths at a time (KEY_TEXT_KEYS keys),
-    so that a string per key exists only for one block: on a long capture they would outweigh the output."""
+    none; closed (P,): the d ends with 'z'): animations, frame-0 d texts, keys written, moving (P,), static
+    offsets (P, 2), keys (P,), mean key text length (P,) and the [least, most] keyTime decimals. A block of
+    paths at a time (KEY_TEXT_KEYS keys), so that a string per key exists only for one block: on a long capture
+    they would outweigh the output."""
     bounds = np.searchsorted(tl.path, np.arange(p + 1))
     counts = np.diff(bounds)
     anims: list[str] = []
@@ -692,7 +792,7 @@ def _d_animations(tl: collapse.Timeline, p: int, t: int, gain: np.ndarray | None
         o = offsets(rows, pk, b - a)
         o[~moving[a:b]] = 0
         off[a:b] = o
-        text = _path_strings(rows, o[pk])
+        text = _path_strings(rows, o[pk], closed[a:b][pk])
         block_anims, block_firsts, n = _keyed("d", pk, b - a, text, kt_text, dur, moving[a:b])
         anims += block_anims
         firsts += block_firsts
@@ -704,13 +804,14 @@ def _d_animations(tl: collapse.Timeline, p: int, t: int, gain: np.ndarray | None
 
 
 def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: np.ndarray, owned: list,
-                  dur: str, report: Report, plan: groups.Plan | None = None,
+                  dur: str, report: Report, st: Strokes, plan: groups.Plan | None = None,
                   color_tolerance: float = 3.0, joined: merge.Merge | None = None,
                   progress: Progress = no_progress) -> tuple[list[str], int, dict]:
     """The error-bounded integer encoding (module docstring) of the paths' tracks (encode.tracks) and their keys
     (collapse.Timeline) within budget, handed over as owned = [track, timeline] (emptied here, so that each is
-    freed as soon as it is used: on a long capture they are the largest arrays); plan: rigid groups (local
-    tracks); colours within color_tolerance levels; joined: paths drawn as one element (converter.encode.merge)."""
+    freed as soon as it is used: on a long capture they are the largest arrays); st: their seam strokes; plan:
+    rigid groups (local tracks); colours within color_tolerance levels; joined: paths drawn as one element
+    (converter.encode.merge)."""
     track, tl = owned
     owned.clear()
     t, p = active.shape
@@ -719,7 +820,8 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     time_budget = budget.keytimes
     radius, bound = _radius(budget, plan)
     progress("text", 0.0)
-    geo = _d_animations(tl, p, t, plan.gain if plan is not None else None, view_scale, time_budget, dur)
+    closed = st.closed(tris)
+    geo = _d_animations(tl, p, t, plan.gain if plan is not None else None, view_scale, time_budget, dur, closed)
     progress("text", 0.2)
     del tl
     heap.give_back()  # the key texts' blocks
@@ -734,16 +836,17 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     d_len[~active.all(axis=0)] = 0  # evenly spaced keys cannot collapse a hidden triangle
     d_len[inside] = 0  # a merged path's d is keyed for all its triangles together (_merged_geometry)
     d_uniform = _uniform_instead("d", track, active, key_counts, d_len, per_key, view_scale,
-                                 bound, True, lambda v, j: _path_strings(v, np.broadcast_to(off[j], (len(v), 2))),
+                                 bound, True, lambda v, j: _path_strings(v, np.broadcast_to(off[j], (len(v), 2)),
+                                                                         np.broadcast_to(closed[j], len(v))),
                                  dur, d_anims)
     heap.give_back()  # the fits' temporaries
     progress("text", 0.65)
     for j in [j for j in d_uniform if active[0, j]]:  # the static d holds frame 0 as played where it is shown
-        d_first[j] = _path_strings(d_uniform[j][:1], off[j:j + 1])[0]
+        d_first[j] = _path_strings(d_uniform[j][:1], off[j:j + 1], closed[j:j + 1])[0]
     if sets:  # a merged path's d is keyed for all its triangles together
         m_radius = np.broadcast_to(np.asarray(radius, np.float64), (p,))
         m_gain = plan.gain if plan is not None else np.ones(p)
-        m_anims, m_first, m_keys = _merged_geometry(track, active, m_radius, m_gain, sets, budget, dur)
+        m_anims, m_first, m_keys = _merged_geometry(track, active, m_radius, m_gain, sets, budget, dur, closed)
     del track
     # Colour: held steps within the colour tolerance (color_steps); the first step's colour is the path's class.
     columns = sheet.color_columns(tris)
@@ -771,8 +874,10 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     cls = remap[np.searchsorted(values, base)]
     pal = values[rank]
     palette = np.stack([(pal >> 16) & 255, (pal >> 8) & 255, pal & 255], axis=1)
-    out = [_style(palette, view_scale), group_open(plan.head, t, dur) if plan is not None else "<g>"]
+    bare = st.bare(tris)
+    out = [_style(palette, view_scale, bool(bare.any())), group_open(plan.head, t, dur) if plan is not None else "<g>"]
     ids = path_ids(tris)
+    bare_cls = np.where(bare, " n", "").tolist()
     moves = [f' transform="translate({x} {y})"' if x or y else "" for x, y in off.tolist()]
     opens: dict[int, str] = {}
     closes: set[int] = set()
@@ -799,7 +904,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
         else:
             body = d_anims[a] + c_anims[a]
             d_anims[a] = c_anims[a] = ""  # each text lives on only in the document's
-            el = f'<path id="{ids[a]}" class="c{cls[a]}"{moves[a]} d="{d_first[a]}"'
+            el = f'<path id="{ids[a]}" class="c{cls[a]}{bare_cls[a]}"{moves[a]} d="{d_first[a]}"'
         out.append(f"{el}>{body}</path>" if body else f"{el}/>")
         if b - 1 in closes:
             out.append(CLOSE)

@@ -21,7 +21,7 @@ from converter.errors import InputError
 from converter.extract import painter_order
 from converter.options import ConversionOptions, Progress, Report, no_progress, span
 from converter.sheet import Sheet
-from converter.writers import svg_anim
+from converter.writers import seams, svg_anim
 from converter.writers.gradients import LinearGradients, exact_gradients, vertex_ramps
 from converter.writers.svgtext import key_times
 from converter.writers.svgtext import number as svg_number
@@ -201,13 +201,9 @@ def _hold_colours_in_range(mask: np.ndarray, values: np.ndarray, active: np.ndar
 
 
 def welded_ids(xy: np.ndarray, depth: np.ndarray) -> np.ndarray:
-    """(V,) one id per group of vertices that coincide in every frame given (xy (T, V, 2), depth (T, V)).
-
-    Meshes split along UV or part seams carry duplicate vertices; welded, their shared edges count as interior.
-    """
-    key = np.concatenate([xy.transpose(1, 0, 2).reshape(xy.shape[1], -1), depth.T], axis=1)
-    _, ids = np.unique(key, axis=0, return_inverse=True)
-    return ids.reshape(-1)
+    """(V,) one id per group of vertices that coincide in every frame given (xy (T, V, 2), depth (T, V)):
+    seams.welded_ids."""
+    return seams.welded_ids(xy, depth)
 
 
 def outline_edges(tris: np.ndarray, ids: np.ndarray | None = None) -> np.ndarray:
@@ -252,8 +248,9 @@ def silhouette_edges(tri_xy: np.ndarray, outline: np.ndarray, width: int, height
 def seam_layout(tris: np.ndarray, skip: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where the anti-crack stroke goes: (rotated triangles (K, 3), closed (K,), stroked (K,)).
 
-    `skip` (K, 3) marks edges not to stroke: outline edges (no neighbour), where a stroke would fatten the
-    silhouette or spill over an occluding contour (a still's underlay covers cracks at folds instead). A
+    `skip` (K, 3) marks edges not to stroke: outline edges (seams.skips: no drawn neighbour at some frame), where a
+    stroke would fatten the silhouette or spill over an occluding contour (a still's underlay covers cracks at
+    folds instead). A
     triangle with one such edge is listed starting after it and written as an open path: fill closes it
     implicitly, the stroke skips it. One with two or three is not stroked; its other edges are left to the
     neighbours' strokes.
@@ -366,7 +363,9 @@ def write(sheet: Sheet, options: ConversionOptions, report: Report, progress: Pr
     silhouette = None
     if method == "exact":
         tris = sheet.faces[order]
-        skip = outline_edges(tris, welded_ids(sheet.xy[frames], sheet.depth[frames]))
+        drawn = np.take(sheet.visible[frames], order, axis=1)
+        skip, _ = seams.skips(welded_ids(sheet.xy[frames], sheet.depth[frames])[tris], drawn, sheet.xy[frames], tris,
+                              SEAM_STROKE / 2)
         if still:  # the underlay keeps off the outer silhouette but covers folds (outline edges with surface beyond)
             silhouette = silhouette_edges(sheet.xy[frames[0]][tris].astype(np.float64), skip, w, h)
         tri, closed, stroked = seam_layout(tris, skip)
@@ -407,7 +406,8 @@ def write(sheet: Sheet, options: ConversionOptions, report: Report, progress: Pr
         keys[True] = _hold_colours_in_range(*keys[True], active, signals)
         report.counts["gouraud_keys"] = int(sum(m.sum() for m, _ in keys.values()))
     emit = _Emit(signals, x, keys, t_all, dur)
-    group = f'<g stroke-width="{SEAM_STROKE}" stroke-linejoin="round">' if method == "exact" else "<g>"
+    seam = f'<g stroke-width="{SEAM_STROKE}" stroke-linejoin="round" stroke-linecap="round">'
+    group = seam if method == "exact" else "<g>"
     out = [
         f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w} {h}" width="{w}" height="{h}">',
         svg_anim.metadata(sheet, options, report, extra={"shading": options.shading, "gouraud_method": method},

@@ -31,20 +31,21 @@ def numbers(values: np.ndarray, decimals: int) -> list[str]:
     return _MINUS_ZERO.sub("0", text)[1:-1].split("\x00")
 
 
-def subpaths(rows: np.ndarray) -> list[str]:
+def subpaths(rows: np.ndarray, closed: np.ndarray | None = None) -> list[str]:
     """Integer rows (K, D) as 'm' and the integers, a space between two but none before a minus sign (it
-    separates them), then 'z': 'm12 5-3 4 0-1z'. Compiled: Python's % formatting of every integer was the
-    writer's text cost (2.1 s of 60 on 8k triangles x 3,000 frames)."""
+    separates them), then 'z' where closed (K,) (default: every row): 'm12 5-3 4 0-1z'. Compiled: Python's %
+    formatting of every integer was the writer's text cost (2.1 s of 60 on 8k triangles x 3,000 frames)."""
     rows = np.ascontiguousarray(rows, np.int64)
     if not len(rows):
         return []
+    shut = np.ones(len(rows), np.bool_) if closed is None else np.ascontiguousarray(closed, np.bool_)
     width = len(str(int(np.abs(rows).max()))) + 2  # sign or space, digits
     buf = np.empty(len(rows) * (3 + rows.shape[1] * width), np.uint8)
-    return buf[:_subpaths(rows, buf)].tobytes().decode("ascii").split("\x00")
+    return buf[:_subpaths(rows, shut, buf)].tobytes().decode("ascii").split("\x00")
 
 
 @numba.njit(cache=True, nogil=True)
-def _subpaths(rows, buf):
+def _subpaths(rows, closed, buf):
     """subpaths() into buf (NUL between rows); returns the length written."""
     pos = 0
     for k in range(rows.shape[0]):
@@ -71,8 +72,9 @@ def _subpaths(rows, buf):
                 buf[pos + i] = 48 + v % 10
                 v //= 10
             pos += n
-        buf[pos] = 122  # z
-        pos += 1
+        if closed[k]:
+            buf[pos] = 122  # z
+            pos += 1
     return pos
 
 

@@ -63,10 +63,16 @@ def test_merged_sets_keyed_in_size_bands_match_one_padded_width():
     budget = svg_anim.ErrorBudget.split(0.25, 256)
     tracks = Tracks(track.reshape(t, 3 * p, 2), np.arange(3 * p).reshape(p, 3))  # each corner its own vertex
     args = (tracks, active, np.full(p, budget.keys), np.ones(p))
-    banded = svg_anim._merged_geometry(*args, sets, budget, "1.6s")
-    single = svg_anim._merged_band(*args, sets, budget, "1.6s")
+    closed = rng.random(p) > 0.3  # open subpaths too: the next moveto is relative to their last point
+    banded = svg_anim._merged_geometry(*args, sets, budget, "1.6s", closed)
+    single = svg_anim._merged_band(*args, sets, budget, "1.6s", closed)
     assert len(set(np.ceil(np.log2([b - a for a, b in sets])).tolist())) >= 3
     assert banded == single and all(banded[0]) and banded[2] > len(sets) * 2
+    # each set's frame-0 d holds its paths' rounded frame-0 corners, open or closed (read back by the verifier)
+    for (a, b), first in zip(sets, banded[1]):
+        assert first.count("m") == b - a and first.count("z") == int(closed[a:b].sum())
+        got = np.array(_triangles_of_d(first)).reshape(b - a, 6) / budget.scale
+        assert np.abs(got - track[0, a:b])[active[0, a:b]].max() <= 2 * budget.tolerance
 
 
 def test_without_a_budget_the_file_is_unchanged(sample):
@@ -133,8 +139,9 @@ def test_chromium_draws_merged_paths_like_single_ones(browser, sample, artifacts
         plain, _ = _write(sheet, color_tolerance=colours)
         data, report = _write(sheet, color_tolerance=colours, max_animations=60)
         assert report.counts["merged_paths"] > 0
-        # Exact colours merge only paths of one shade; static ones take a palette's nearest colour.
-        mean_levels = 1.0 if colours == 3.0 else 6.0
+        # Exact colours merge only paths of one shade; static ones take a palette's nearest colour. Reordered
+        # neighbours swap which of their seam strokes (0.3 px either side of an edge) lies on top: 1.05 measured.
+        mean_levels = 1.2 if colours == 3.0 else 6.0
         for k in (0, 13, 27, 39):
             a = chromium_frame(browser, plain, k / anim.fps, size, size)
             b = chromium_frame(browser, data, k / anim.fps, size, size)
@@ -165,7 +172,7 @@ def test_mobile_preset_frame_structure_in_chromium(browser, sample_path):
             kinds: [...new Set([...document.querySelectorAll('svg animate')].map(
                 a => a.getAttribute('attributeName')))],
             triangles: [...document.querySelectorAll('svg path')].reduce(
-                (n, p) => n + (p.getAttribute('d').match(/z/gi) || []).length, 0)})""")
+                (n, p) => n + (p.getAttribute('d').match(/m/gi) || []).length, 0)})""")
     finally:
         page.close()
     assert counts["paths"] == result.report.counts["paths"] <= budget
