@@ -15,9 +15,12 @@ from converter.convert import convert
 from converter.encode import parallel
 from converter.errors import FacesvgError, InputError
 from converter.formats import captures
+from converter.formats.weights import read_weights
 from converter.options import ConversionOptions, Eta, OptionField, option_fields
 from converter.outputs import choices, output_kind
-from converter.userfiles import check_output, write_atomic
+from converter.puppet.take import from_track as take_from_track
+from converter.userfiles import check_output, read_bytes, write_atomic
+from converter.writers import puppet as puppet_writer
 
 
 class ProgressBar:
@@ -174,6 +177,15 @@ def cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_puppet_take(args: argparse.Namespace) -> int:
+    """facesvg puppet-take PUPPET.html CAPTURE -o NEW.html: the puppet with another take embedded, no conversion."""
+    out = check_output(Path(args.output) if args.output else Path(args.puppet))
+    page = puppet_writer.replace_take(read_bytes(args.puppet, "puppet"), take_from_track(read_weights(args.capture)))
+    write_atomic(out, page)
+    print(f"{out}: {len(page)} bytes")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand."""
     parser = argparse.ArgumentParser(prog="facesvg", description="Turn 3D facial animation into lightweight 2D.")
@@ -208,6 +220,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.add_argument("--progress", action="store_true", help="progress bar even when stderr is not a terminal")
     p.set_defaults(func=cmd_warm)
+
+    p = sub.add_parser("puppet-take", help="embed another capture in a puppet (--to puppet) without converting")
+    p.add_argument("puppet", help="the puppet .html")
+    p.add_argument("capture", help="the weight capture (any layout --weights reads)")
+    p.add_argument("-o", "--output", help="output file (default: replace the puppet file)")
+    p.set_defaults(func=cmd_puppet_take)
 
     # Other subcommands register here (verify, clone, fdp, fap-loa, serve).
     for register in _extra_commands():

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from converter import cloning, formats, framing, heap, mpeg4, simplify, smoothing
+from converter import cloning, formats, framing, heap, mpeg4, puppet, simplify, smoothing
 from converter import extract as extraction
 from converter.animation import FaceAnimation
 from converter.blendshapes import drive_file
@@ -17,7 +17,7 @@ from converter.encode.parallel import serial_blas
 from converter.errors import InputError
 from converter.mpeg4 import fat2d
 from converter.options import ConversionOptions, Progress, Report, no_progress, span
-from converter.outputs import FAT2D, SHEET, OutputKind, output_kind
+from converter.outputs import FAT2D, PUPPET, SHEET, OutputKind, output_kind
 from converter.sheet import Sheet
 from converter.userfiles import file_sha256
 
@@ -44,6 +44,8 @@ class Result:
 def load(path: str | Path, options: ConversionOptions, cache: str | Path | None = None,
          progress: Progress = no_progress) -> FaceAnimation:
     """Read the input file named by path (plus an optional point cache) with the options' fps and animation."""
+    if output_kind(options.to).stage == PUPPET:  # the face itself and the capture to embed: the stage reads both
+        return puppet.load(path, options, progress=lambda s, f: progress(s, LOADED_AT * f))
     if options.weights:  # the input is a face with named morph targets, animated by the capture
         return drive_file(path, options.weights, fps=options.fps, progress=lambda s, f: progress(s, LOADED_AT * f))
     return formats.load(path, fps=options.fps, cache=cache, animation=options.animation)
@@ -120,6 +122,7 @@ def extract_sheet(anim: FaceAnimation, options: ConversionOptions, report: Repor
 STAGES: dict[str, Callable[[FaceAnimation, ConversionOptions, Report, Progress], Any]] = {
     SHEET: extract_sheet,
     FAT2D: fat2d.stage,
+    PUPPET: puppet.stage,
 }
 """The 2D stage of each OutputKind.stage: prepared FaceAnimation -> what the kind's writer reads."""
 

@@ -12,13 +12,14 @@ from typing import Any
 
 from converter.errors import InputError
 from converter.options import ConversionOptions, OptionField, Progress, Report
-from converter.writers import fap2d, player, svg_anim, svg_gouraud
+from converter.writers import fap2d, player, puppet, svg_anim, svg_gouraud
 
 Writer = Callable[[Any, ConversionOptions, Report, Progress], bytes]  # (2D data, options, report, progress)
 """(what the stage built: a Sheet or a Fat2dSheet, options, report) -> the output's bytes."""
 
 SHEET = "sheet"  # converter.extract: projected, culled, shaded frames (converter.sheet.Sheet)
 FAT2D = "fat2d"  # converter.mpeg4.fat2d: portrait, 2D mesh, 2D FAT and FAP stream (Fat2dSheet)
+PUPPET = "puppet"  # converter.puppet: a face's 2D mesh and per-parameter 2D FAT tables (Puppet)
 
 
 @dataclass(frozen=True)
@@ -85,6 +86,9 @@ OUTPUTS: dict[str, OutputKind] = {k.name: k for k in (
                (OutputFile("fap2d", "2D face package (.zip)", ".zip", "application/zip", attachment=True,
                            download_suffix=".fap2d.zip"),),
                stage=FAT2D, requires=("fap", "fdp"), requires_text="a FAP stream and an FDP file", stills=False),
+    OutputKind("puppet", "Puppet (HTML, drive with any capture)", puppet.write,
+               (OutputFile("puppet", "Puppet (.html)", ".html", "text/html", download_suffix=".puppet.html"),),
+               stage=PUPPET, stills=False),
 )}
 """Every output kind by name, in the order the CLI, the form and OpenAPI offer them."""
 

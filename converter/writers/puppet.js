@@ -1,0 +1,673 @@
+// The facesvg puppet player (converter/writers/puppet.py inlines it): a 2D face driven by named weights and head
+// and eye angles, from the embedded take, the sliders, a live WebSocket feed or window.puppet.set(...).
+// It evaluates no strings and fetches nothing: the only connection it opens is the WebSocket a user names.
+(function () {
+  "use strict";
+
+  const $ = (id) => document.getElementById(id);
+  const DEG = Math.PI / 180;
+
+  function say(text) {
+    const el = $("puppet-status");
+    if (el) el.textContent = text;
+  }
+
+  function base64Bytes(text) {
+    const s = atob(text.replace(/\s+/g, ""));
+    const out = new Uint8Array(s.length);
+    for (let i = 0; i < s.length; i++) out[i] = s.charCodeAt(i);
+    return out;
+  }
+
+  // Inflate a zlib block with the browser's DecompressionStream into one buffer of the stated length.
+  async function inflate(bytes, expected) {
+    const out = new Uint8Array(expected);
+    if (!bytes.length) return out;
+    if (typeof DecompressionStream !== "function") {
+      throw new Error("this browser cannot unpack the puppet (it has no DecompressionStream); use a current one.");
+    }
+    const reader = new Blob([bytes]).stream().pipeThrough(new DecompressionStream("deflate")).getReader();
+    let n = 0;
+    for (;;) {
+      const { done, value } = await reader.read();
+      if (done) break;
+      if (n + value.length > expected) throw new Error("the puppet's data block is longer than stated: corrupt.");
+      out.set(value, n);
+      n += value.length;
+    }
+    if (n !== expected) throw new Error("the puppet's data block is shorter than stated: corrupt.");
+    return out;
+  }
+
+  // One array of a block from its index entry [offset, dtype, length]; "p" dtypes are byte planes.
+  function view(buf, entry) {
+    const [off, kind, n] = entry;
+    if (kind.endsWith("p")) {
+      const lo = buf.subarray(off, off + n), hi = buf.subarray(off + n, off + 2 * n);
+      const out = kind.startsWith("i") ? new Int16Array(n) : new Uint16Array(n);
+      for (let i = 0; i < n; i++) out[i] = lo[i] | (hi[i] << 8);
+      return out;
+    }
+    const at = buf.byteOffset + off;
+    switch (kind) {
+      case "f4": return new Float32Array(buf.buffer, at, n);
+      case "i4": return new Int32Array(buf.buffer, at, n);
+      case "i2": return new Int16Array(buf.slice(off, off + 2 * n).buffer);
+      case "u2": return new Uint16Array(buf.slice(off, off + 2 * n).buffer);
+      case "i1": return new Int8Array(buf.buffer, at, n);
+      default: return new Uint8Array(buf.buffer, at, n);
+    }
+  }
+
+  // Capture names as converter.blendshapes.normalise reads them: (base, side).
+  const SIDE = /(?:[._\s-](l|r|left|right)|(left|right))$/i;
+  const PREFIX = /^(?:arkit|bs|blendshapes?|shapes?|morphs?)[_\-\s]+/i;
+  function normalise(name) {
+    let s = String(name).trim(), side = "";
+    const m = SIDE.exec(s);
+    if (m && m.index > 0) {
+      side = (m[1] || m[2])[0].toUpperCase();
+      s = s.slice(0, m.index);
+    }
+    if (/[.:|]/.test(s)) {
+      const parts = s.split(/[.:|]/);
+      s = parts[parts.length - 1];
+    }
+    s = s.replace(PREFIX, "");
+    return [s.replace(/[\s_\-.]/g, "").toLowerCase(), side];
+  }
+
+  // Interval i and fraction of x on a sorted axis, extrapolating from the end intervals.
+  function segment(axis, x) {
+    let i = 0;
+    while (i < axis.length - 2 && x >= axis[i + 1]) i++;
+    return [i, (x - axis[i]) / (axis[i + 1] - axis[i])];
+  }
+
+  const POSE_NAMES = ["headYaw", "headPitch", "headRoll", "eyeYawLeft", "eyePitchLeft", "eyeYawRight", "eyePitchRight"];
+
+  class Model {
+    constructor(meta, buf) {
+      this.meta = meta;
+      const a = meta.arrays;
+      this.V = meta.vertices;
+      this.F = meta.triangles;
+      this.xy0 = view(buf, a.xy);
+      this.z0 = view(buf, a.z);
+      this.tris = view(buf, a.tris);
+      for (let i = 1; i < this.tris.length; i++) this.tris[i] += this.tris[i - 1];  // stored as gaps
+      this.colors = view(buf, a.colors);
+      const param = (p) => {
+        const v = view(buf, a[p.key + ".v"]).slice(), xy = view(buf, a[p.key + ".xy"]), z = view(buf, a[p.key + ".z"]);
+        for (let m = 1; m < v.length; m++) v[m] += v[m - 1];  // stored as gaps
+        if (p.residual) {  // inner keyforms: differences from the linear prediction floor(w * last + 1/2)
+          const w = p.axes[0], S = w.length, M = v.length;
+          const unpack = (arr, n) => {
+            const last = (S - 1) * M * n;
+            for (let s = 1; s < S - 1; s++) {
+              for (let i = 0; i < M * n; i++) arr[s * M * n + i] += Math.floor(w[s] * arr[last + i] + 0.5);
+            }
+          };
+          unpack(xy, 2);
+          unpack(z, 1);
+        }
+        return Object.assign({}, p, { v, xy, z });
+      };
+      this.morphs = meta.morphs.map(param);
+      this.eyes = meta.eyes.map((e) => ({ centre: e.centre, v: view(buf, a[e.key + ".v"]) }));
+      this.q = new Float64Array(3 * this.V);
+      this.xy = new Float32Array(2 * this.V);
+      this.z = new Float32Array(this.V);
+      this.own = new Map(this.morphs.map((p, k) => [p.name, k]));
+      this.byKey = new Map();
+      meta.keys.forEach((key, k) => {
+        const s = key.join("\u0000");
+        if (!this.byKey.has(s)) this.byKey.set(s, []);
+        this.byKey.get(s).push(k);
+      });
+      this.resolved = new Map();
+    }
+
+    // What a name drives: [[morph index, factor], ...] (own name, alias, normalised name; sideless -> both sides).
+    resolve(name) {
+      if (this.resolved.has(name)) return this.resolved.get(name);
+      let out = [];
+      if (this.own.has(name)) out = [[this.own.get(name), 1]];
+      else if (Object.prototype.hasOwnProperty.call(this.meta.aliases, name)) out = this.meta.aliases[name];
+      else {
+        const [base, side] = normalise(name);
+        let hits = this.byKey.get(base + "\u0000" + side) || [];
+        if (!hits.length && !side) {
+          hits = (this.byKey.get(base + "\u0000L") || []).concat(this.byKey.get(base + "\u0000R") || []);
+        }
+        out = hits.map((k) => [k, 1]);
+      }
+      this.resolved.set(name, out);
+      return out;
+    }
+
+    addKeyform(p, s, f, xy, z) {
+      if (!f) return;
+      const M = p.v.length, off = s * M, sx = f * p.xyStep, sz = f * p.zStep;
+      for (let m = 0; m < M; m++) {
+        const vi = p.v[m], q = off + m;
+        xy[2 * vi] += sx * p.xy[2 * q];
+        xy[2 * vi + 1] += sx * p.xy[2 * q + 1];
+        z[vi] += sz * p.z[q];
+      }
+    }
+
+    // World point of pixel (x, y) and NDC depth z into out[0..2]: the camera's inverse.
+    unproject(x, y, z, out) {
+      const m = this.meta.inverse, nx = 2 * x / this.meta.width - 1, ny = 1 - 2 * y / this.meta.height;
+      const w = m[12] * nx + m[13] * ny + m[14] * z + m[15];
+      out[0] = (m[0] * nx + m[1] * ny + m[2] * z + m[3]) / w;
+      out[1] = (m[4] * nx + m[5] * ny + m[6] * z + m[7]) / w;
+      out[2] = (m[8] * nx + m[9] * ny + m[10] * z + m[11]) / w;
+    }
+
+    // Positions (px) and NDC depth of the pose: weights per morph, head [yaw, pitch, roll], eyes [ly, lp, ry, rp]
+    // (converter.puppet.model.pose, the same arithmetic).
+    evaluate(weights, head, eyes) {
+      const xy = this.xy, z = this.z;
+      xy.set(this.xy0);
+      z.set(this.z0);
+      this.morphs.forEach((p, k) => {
+        let w = weights[k];
+        if (p.clamp) w = Math.min(Math.max(w, 0), 1);
+        if (p.binary) w = w > 0.5 ? 1 : 0;
+        if (!w || !p.v.length) return;
+        const [i, a] = segment(p.axes[0], w);
+        if (i > 0) this.addKeyform(p, i, 1 - a, xy, z);  // keyform 0 (weight 0) moves nothing
+        this.addKeyform(p, i + 1, a, xy, z);
+      });
+      const [yaw, pitch, roll] = head, turnHead = yaw || pitch || roll;
+      const turnEyes = this.eyes.map((e, k) => eyes[2 * k] || eyes[2 * k + 1]);
+      if (!turnHead && !turnEyes.some(Boolean)) return;
+      // Rigid turns in world space, as blendshapes.drive turns the morphed face: eyes about their centres, then
+      // the head about its pivot (R = Ry Rx Rz), projected again.
+      const q = this.q, t = [0, 0, 0], m = this.meta.matrix, W = this.meta.width, H = this.meta.height;
+      const mark = turnHead ? null : new Uint8Array(this.V);
+      const lift = (v) => {
+        this.unproject(xy[2 * v], xy[2 * v + 1], z[v], t);
+        q[3 * v] = t[0]; q[3 * v + 1] = t[1]; q[3 * v + 2] = t[2];
+      };
+      if (turnHead) for (let v = 0; v < this.V; v++) lift(v);
+      this.eyes.forEach((e, k) => {
+        if (!turnEyes[k]) return;
+        const r = rotation(eyes[2 * k], eyes[2 * k + 1], 0), [cx, cy, cz] = e.centre;
+        for (const v of e.v) {
+          if (mark) { lift(v); mark[v] = 1; }
+          turn(q, 3 * v, r, cx, cy, cz);
+        }
+      });
+      const [px, py, pz] = this.meta.pivot, r = turnHead ? rotation(yaw, pitch, roll) : null;
+      for (let v = 0; v < this.V; v++) {
+        if (mark && !mark[v]) continue;
+        if (r) turn(q, 3 * v, r, px, py, pz);
+        const X = q[3 * v], Y = q[3 * v + 1], Z = q[3 * v + 2];
+        const cw = m[12] * X + m[13] * Y + m[14] * Z + m[15];
+        xy[2 * v] = ((m[0] * X + m[1] * Y + m[2] * Z + m[3]) / cw + 1) * 0.5 * W;
+        xy[2 * v + 1] = (1 - (m[4] * X + m[5] * Y + m[6] * Z + m[7]) / cw) * 0.5 * H;
+        z[v] = (m[8] * X + m[9] * Y + m[10] * Z + m[11]) / cw;
+      }
+    }
+  }
+
+  // Ry(yaw) Rx(pitch) Rz(roll), row-major (converter.blendshapes.rotations).
+  function rotation(yaw, pitch, roll) {
+    const cy = Math.cos(yaw), sy = Math.sin(yaw), cp = Math.cos(pitch), sp = Math.sin(pitch);
+    const cr = Math.cos(roll), sr = Math.sin(roll);
+    const a = [cy, sy * sp, sy * cp, 0, cp, -sp, -sy, cy * sp, cy * cp];  // Ry Rx
+    return [a[0] * cr + a[1] * sr, -a[0] * sr + a[1] * cr, a[2],
+            a[3] * cr + a[4] * sr, -a[3] * sr + a[4] * cr, a[5],
+            a[6] * cr + a[7] * sr, -a[6] * sr + a[7] * cr, a[8]];
+  }
+
+  // q[i..i+2] = r (q - c) + c.
+  function turn(q, i, r, cx, cy, cz) {
+    const x = q[i] - cx, y = q[i + 1] - cy, z = q[i + 2] - cz;
+    q[i] = r[0] * x + r[1] * y + r[2] * z + cx;
+    q[i + 1] = r[3] * x + r[4] * y + r[5] * z + cy;
+    q[i + 2] = r[6] * x + r[7] * y + r[8] * z + cz;
+  }
+
+  // WebGL: depth-tested triangles, back faces culled, corners rebuilt from the evaluated vertices each frame.
+  class GLView {
+    constructor(canvas, model) {
+      const opts = { antialias: false, preserveDrawingBuffer: true, alpha: true, premultipliedAlpha: false };
+      const gl = canvas.getContext("webgl2", opts) || canvas.getContext("webgl", opts);
+      if (!gl) throw new Error("no WebGL");
+      this.gl = gl;
+      this.model = model;
+      const vs = "attribute vec3 p; attribute vec3 c; varying vec3 vc;" +
+                 "void main(){ vc = c; gl_Position = vec4(p, 1.0); }";
+      const fs = "precision mediump float; varying vec3 vc; void main(){ gl_FragColor = vec4(vc, 1.0); }";
+      const shader = (type, src) => {
+        const s = gl.createShader(type);
+        gl.shaderSource(s, src);
+        gl.compileShader(s);
+        if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error(gl.getShaderInfoLog(s));
+        return s;
+      };
+      const prog = gl.createProgram();
+      gl.attachShader(prog, shader(gl.VERTEX_SHADER, vs));
+      gl.attachShader(prog, shader(gl.FRAGMENT_SHADER, fs));
+      gl.bindAttribLocation(prog, 0, "p");
+      gl.bindAttribLocation(prog, 1, "c");
+      gl.linkProgram(prog);
+      if (!gl.getProgramParameter(prog, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(prog));
+      gl.useProgram(prog);
+      const F = model.F, tris = model.tris, colors = model.colors, gouraud = model.meta.gouraud;
+      const rgb = new Uint8Array(9 * F);
+      for (let f = 0; f < F; f++) {
+        for (let c = 0; c < 3; c++) {
+          const src = gouraud ? 3 * tris[3 * f + c] : 3 * f;
+          rgb.set(colors.subarray(src, src + 3), 9 * f + 3 * c);
+        }
+      }
+      this.corners = new Float32Array(9 * F);
+      this.pos = gl.createBuffer();
+      gl.bindBuffer(gl.ARRAY_BUFFER, this.pos);
+      gl.bufferData(gl.ARRAY_BUFFER, this.corners, gl.DYNAMIC_DRAW);
+      gl.enableVertexAttribArray(0);
+      gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
+      const col = gl.createBuffer();
+      gl.bindBuffer(gl.ARRAY_BUFFER, col);
+      gl.bufferData(gl.ARRAY_BUFFER, rgb, gl.STATIC_DRAW);
+      gl.enableVertexAttribArray(1);
+      gl.vertexAttribPointer(1, 3, gl.UNSIGNED_BYTE, true, 0, 0);
+      gl.enable(gl.DEPTH_TEST);
+      gl.depthFunc(gl.LEQUAL);
+      gl.enable(gl.CULL_FACE);
+      gl.frontFace(gl.CCW);
+      gl.cullFace(gl.BACK);
+      gl.clearColor(0, 0, 0, 0);
+      gl.clearDepth(1);
+      gl.viewport(0, 0, canvas.width, canvas.height);
+      this.kind = gl instanceof window.WebGLRenderingContext ? "webgl" : "webgl2";
+    }
+
+    draw() {
+      const gl = this.gl, m = this.model, xy = m.xy, z = m.z, tris = m.tris, out = this.corners;
+      const sx = 2 / m.meta.width, sy = 2 / m.meta.height, n = 3 * m.F;
+      for (let i = 0; i < n; i++) {
+        const v = tris[i];
+        out[3 * i] = xy[2 * v] * sx - 1;
+        out[3 * i + 1] = 1 - xy[2 * v + 1] * sy;
+        out[3 * i + 2] = z[v];
+      }
+      gl.bindBuffer(gl.ARRAY_BUFFER, this.pos);
+      gl.bufferSubData(gl.ARRAY_BUFFER, 0, out);
+      gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
+      gl.drawArrays(gl.TRIANGLES, 0, n);
+    }
+  }
+
+  // Canvas 2D: back faces dropped, the others filled far to near (painter's order by mean depth).
+  class CanvasView {
+    constructor(canvas, model) {
+      this.ctx = canvas.getContext("2d");
+      this.model = model;
+      this.kind = "canvas";
+      const F = model.F, tris = model.tris, c = model.colors;
+      this.fill = [];
+      for (let f = 0; f < F; f++) {
+        let r, g, b;
+        if (model.meta.gouraud) {
+          const [a0, a1, a2] = [3 * tris[3 * f], 3 * tris[3 * f + 1], 3 * tris[3 * f + 2]];
+          r = (c[a0] + c[a1] + c[a2]) / 3; g = (c[a0 + 1] + c[a1 + 1] + c[a2 + 1]) / 3;
+          b = (c[a0 + 2] + c[a1 + 2] + c[a2 + 2]) / 3;
+        } else {
+          r = c[3 * f]; g = c[3 * f + 1]; b = c[3 * f + 2];
+        }
+        this.fill.push(`rgb(${Math.round(r)},${Math.round(g)},${Math.round(b)})`);
+      }
+      this.depth = new Float32Array(F);
+      this.ids = new Uint32Array(F);
+    }
+
+    draw() {
+      const m = this.model, xy = m.xy, z = m.z, tris = m.tris, ctx = this.ctx;
+      let n = 0;
+      for (let f = 0; f < m.F; f++) {
+        const a = tris[3 * f], b = tris[3 * f + 1], c = tris[3 * f + 2];
+        const ax = xy[2 * a], ay = xy[2 * a + 1];
+        const area2 = (xy[2 * b] - ax) * (xy[2 * c + 1] - ay) - (xy[2 * b + 1] - ay) * (xy[2 * c] - ax);
+        if (!(area2 < 0)) continue;  // y down: a front (counter-clockwise in GL) triangle has negative area
+        this.depth[f] = z[a] + z[b] + z[c];
+        this.ids[n++] = f;
+      }
+      const order = Array.from(this.ids.subarray(0, n)).sort((p, q) => this.depth[q] - this.depth[p]);
+      ctx.clearRect(0, 0, m.meta.width, m.meta.height);
+      ctx.lineWidth = 0.5;
+      ctx.lineJoin = "round";
+      for (const f of order) {
+        const a = tris[3 * f], b = tris[3 * f + 1], c = tris[3 * f + 2];
+        ctx.beginPath();
+        ctx.moveTo(xy[2 * a], xy[2 * a + 1]);
+        ctx.lineTo(xy[2 * b], xy[2 * b + 1]);
+        ctx.lineTo(xy[2 * c], xy[2 * c + 1]);
+        ctx.closePath();
+        ctx.fillStyle = this.fill[f];
+        ctx.fill();
+        ctx.strokeStyle = this.fill[f];  // covers the hairline seams between anti-aliased neighbours
+        ctx.stroke();
+      }
+    }
+  }
+
+  // The embedded take: uint8 weights per name per frame, head and eye angles as small integers.
+  class TakeData {
+    constructor(meta, buf) {
+      this.meta = meta;
+      this.names = meta.names;
+      this.K = meta.names.length;
+      this.frames = meta.frames;
+      this.weights = view(buf, meta.arrays.weights);
+      this.head = meta.arrays.head ? view(buf, meta.arrays.head) : null;
+      this.eyes = meta.arrays.eyes ? view(buf, meta.arrays.eyes) : null;
+      this.times = new Float64Array(this.frames);
+      if (meta.arrays.times) {
+        const gaps = view(buf, meta.arrays.times);
+        let t = 0;
+        for (let k = 0; k < this.frames; k++) { t += gaps[k] / 1000; this.times[k] = t; }
+      } else {
+        for (let k = 0; k < this.frames; k++) this.times[k] = k / meta.fps;
+      }
+      this.duration = this.times[this.frames - 1] - this.times[0] + 1 / meta.fps;
+    }
+
+    // Frame and fraction towards the next one at t seconds (t from the first frame).
+    locate(t) {
+      const ts = this.times, t0 = ts[0] + t;
+      let lo = 0, hi = this.frames - 1;
+      if (t0 <= ts[0]) return [0, 0];
+      if (t0 >= ts[hi]) return [hi, 0];
+      while (hi - lo > 1) {
+        const mid = (lo + hi) >> 1;
+        if (ts[mid] <= t0) lo = mid; else hi = mid;
+      }
+      return [lo, (t0 - ts[lo]) / (ts[lo + 1] - ts[lo])];
+    }
+  }
+
+  class Puppet {
+    constructor(model, viewer, take) {
+      this.model = model;
+      this.viewer = viewer;
+      this.take = take;
+      this.inputs = new Map();  // normalised name -> [name, weight], from the take, set() and the live feed
+      this.keys = new Map();  // name -> its normalised key
+      this.pose = new Float64Array(7);  // head yaw, pitch, roll, eyes left yaw, pitch, right yaw, pitch (radians)
+      this.weights = new Float32Array(model.morphs.length);
+      this.time = 0;
+      this.playing = false;
+      this.dirty = true;
+      this.socket = null;
+      this.frameCount = 0;
+      this.lastFrameMs = 0;
+      this.sliders = new Map();
+    }
+
+    // Weights by name ({jawOpen: 0.4}); head: [yaw, pitch, roll] and eyes: [ly, lp, ry, rp] in radians, or their
+    // own names (headYaw, eyePitchLeft, ...).
+    set(values, head, eyes) {
+      if (values && typeof values === "object") {
+        for (const [name, v] of Object.entries(values)) {
+          if (name === "head" && Array.isArray(v)) this.setPose(v, 0);
+          else if (name === "eyes" && Array.isArray(v)) this.setPose(v, 3);
+          else if (POSE_NAMES.includes(name)) this.pose[POSE_NAMES.indexOf(name)] = Number(v) || 0;
+          else this.input(name, Number(v) || 0);
+        }
+      }
+      if (Array.isArray(head)) this.setPose(head, 0);
+      if (Array.isArray(eyes)) this.setPose(eyes, 3);
+      this.dirty = true;
+      this.syncSliders();
+      return this;
+    }
+
+    // One named weight; spellings of one name (JawOpen, jawOpen, jaw_open) are one input.
+    input(name, v) {
+      let key = this.keys.get(name);
+      if (key === undefined) {
+        key = normalise(name).join("\u0000");
+        this.keys.set(name, key);
+      }
+      this.inputs.set(key, [name, v]);
+    }
+
+    setPose(values, at) {
+      values.forEach((v, i) => { if (at + i < 7) this.pose[at + i] = Number(v) || 0; });
+    }
+
+    reset() {
+      this.inputs.clear();
+      this.pose.fill(0);
+      this.dirty = true;
+      this.syncSliders();
+    }
+
+    weightsNow() {
+      const w = this.weights;
+      w.fill(0);
+      for (const [name, v] of this.inputs.values()) {
+        for (const [k, f] of this.model.resolve(name)) w[k] += f * v;
+      }
+      return w;
+    }
+
+    applyTake(t) {
+      const tk = this.take;
+      if (!tk) return;
+      const [k, a] = tk.locate(t), k1 = Math.min(k + 1, tk.frames - 1), K = tk.K;
+      for (let c = 0; c < K; c++) {
+        const v = (1 - a) * tk.weights[k * K + c] + a * tk.weights[k1 * K + c];
+        this.input(tk.names[c], v / 255);
+      }
+      if (tk.head) {
+        for (let i = 0; i < 3; i++) {
+          this.pose[i] = ((1 - a) * tk.head[3 * k + i] + a * tk.head[3 * k1 + i]) * tk.meta.headUnit;
+        }
+      }
+      if (tk.eyes) {
+        for (let i = 0; i < 4; i++) {
+          this.pose[3 + i] = ((1 - a) * tk.eyes[4 * k + i] + a * tk.eyes[4 * k1 + i]) * tk.meta.eyeUnit;
+        }
+      }
+      this.dirty = true;
+    }
+
+    render() {
+      const t0 = performance.now();
+      const p = this.pose;
+      this.model.evaluate(this.weightsNow(), [p[0], p[1], p[2]], [p[3], p[4], p[5], p[6]]);
+      this.viewer.draw();
+      this.dirty = false;
+      this.frameCount++;
+      this.lastFrameMs = performance.now() - t0;
+    }
+
+    seek(t) {
+      this.time = Math.max(0, Number(t) || 0);
+      if (this.take) {
+        this.time = Math.min(this.time, this.take.duration);
+        this.applyTake(this.time);
+      }
+      this.updateClock();
+      this.render();
+      return this;
+    }
+
+    play() {
+      if (!this.take || this.playing) return this;
+      if (this.time >= this.take.duration) this.time = 0;
+      this.playing = true;
+      this.started = performance.now() - this.time * 1000;
+      const button = $("puppet-play");
+      if (button) { button.textContent = "Pause"; button.setAttribute("aria-pressed", "true"); }
+      return this;
+    }
+
+    pause() {
+      this.playing = false;
+      const button = $("puppet-play");
+      if (button) { button.textContent = "Play"; button.setAttribute("aria-pressed", "false"); }
+      this.syncSliders();
+      return this;
+    }
+
+    tick(now) {
+      if (this.playing && this.take) {
+        this.time = (now - this.started) / 1000;
+        if (this.time >= this.take.duration) {
+          this.time = this.time % this.take.duration;
+          this.started = now - this.time * 1000;
+        }
+        this.applyTake(this.time);
+        this.updateClock();
+      }
+      if (this.dirty) this.render();
+    }
+
+    updateClock() {
+      const scrub = $("puppet-scrub"), out = $("puppet-time");
+      if (scrub && this.take) scrub.value = String(this.time / this.take.duration);
+      if (out) out.textContent = this.time.toFixed(2) + " s";
+    }
+
+    // Live weights: JSON messages {"weights": {name: w}, "head": [yaw, pitch, roll], "eyes": [...]}, radians.
+    connect(url) {
+      if (this.socket) this.socket.close();
+      let socket;
+      try {
+        socket = new WebSocket(url);
+      } catch (err) {
+        say("Cannot connect: " + err.message);
+        return null;
+      }
+      this.socket = socket;
+      this.pause();
+      socket.onopen = () => say("Live: " + url);
+      socket.onclose = () => { if (this.socket === socket) say("Live feed closed."); };
+      socket.onerror = () => say("Live feed error: " + url);
+      socket.onmessage = (e) => {
+        let msg;
+        try { msg = JSON.parse(e.data); } catch (err) { return; }
+        if (!msg || typeof msg !== "object") return;
+        this.set(msg.weights || {}, msg.head, msg.eyes);
+        this.lastMessage = performance.now();
+      };
+      return socket;
+    }
+
+    syncSliders() {
+      if (this.playing) return;
+      const w = this.weightsNow();
+      for (const [key, input] of this.sliders) {
+        let v;
+        if (key.startsWith("#")) v = this.pose[Number(key.slice(1))] / DEG;
+        else v = w[Number(key)];
+        input.value = String(v);
+        input.nextElementSibling.textContent = Number(v).toFixed(2);
+      }
+    }
+
+    buildPanel() {
+      const box = $("puppet-sliders");
+      if (!box) return;
+      const add = (label, key, min, max, step, onInput) => {
+        const row = document.createElement("label");
+        const name = document.createElement("span");
+        name.textContent = label;
+        const input = document.createElement("input");
+        Object.assign(input, { type: "range", min: String(min), max: String(max), step: String(step), value: "0" });
+        const out = document.createElement("output");
+        out.textContent = "0.00";
+        input.addEventListener("input", () => { this.pause(); onInput(Number(input.value)); });
+        row.append(name, input, out);
+        box.append(row);
+        this.sliders.set(key, input);
+      };
+      this.model.morphs.forEach((p, k) => add(p.name, String(k), 0, 1, 0.01, (v) => this.set({ [p.name]: v })));
+      const poses = [["head yaw", 40], ["head pitch", 40], ["head roll", 40]];
+      if (this.model.eyes.length) {
+        poses.push(["left eye yaw", 30], ["left eye pitch", 30], ["right eye yaw", 30], ["right eye pitch", 30]);
+      }
+      poses.forEach(([label, range], i) => add(label + " (\u00b0)", "#" + i, -range, range, 0.5,
+        (v) => this.set({ [POSE_NAMES[i]]: v * DEG })));
+    }
+  }
+
+  async function start() {
+    const meta = JSON.parse($("puppet-meta").textContent);
+    const dataEl = $("puppet-data");
+    const buf = await inflate(base64Bytes(dataEl.textContent), Number(dataEl.dataset.bytes));
+    const model = new Model(meta, buf);
+    const takeEl = $("puppet-take");
+    let take = null;
+    const takeMeta = takeEl && takeEl.dataset.meta ? JSON.parse(takeEl.dataset.meta) : null;
+    if (takeMeta && takeEl.textContent.trim()) {
+      take = new TakeData(takeMeta, await inflate(base64Bytes(takeEl.textContent), Number(takeEl.dataset.bytes)));
+    }
+    const params = new URLSearchParams(window.location.search);
+    const canvas = $("puppet-canvas");
+    let viewer = null;
+    if (params.get("renderer") !== "canvas") {
+      try { viewer = new GLView(canvas, model); } catch (err) { viewer = null; }
+    }
+    if (!viewer) {
+      const fresh = canvas.cloneNode(false);  // a canvas that tried WebGL cannot give a 2D context
+      canvas.replaceWith(fresh);
+      viewer = new CanvasView(fresh, model);
+    }
+    const puppet = new Puppet(model, viewer, take);
+    puppet.buildPanel();
+    const api = {
+      set: (values, head, eyes) => { puppet.set(values, head, eyes); return api; },
+      play: () => { puppet.play(); return api; },
+      pause: () => { puppet.pause(); return api; },
+      seek: (t) => { puppet.seek(t); return api; },
+      reset: () => { puppet.reset(); return api; },
+      render: () => { puppet.render(); return api; },
+      connect: (url) => puppet.connect(url),
+      get time() { return puppet.time; },
+      get duration() { return take ? take.duration : 0; },
+      get playing() { return puppet.playing; },
+      get renderer() { return viewer.kind; },
+      get frames() { return puppet.frameCount; },
+      get frameMs() { return puppet.lastFrameMs; },
+      parameters: model.morphs.map((p) => p.name).concat(POSE_NAMES.slice(0, model.eyes.length ? 7 : 3)),
+      weights: () => Object.fromEntries(model.morphs.map((p, k) => [p.name, puppet.weightsNow()[k]])),
+      positions: () => ({ xy: Array.from(model.xy), z: Array.from(model.z) }),
+    };
+    window.puppet = api;
+    const play = $("puppet-play"), scrub = $("puppet-scrub");
+    if (take) {
+      play.addEventListener("click", () => (puppet.playing ? puppet.pause() : puppet.play()));
+      scrub.addEventListener("input", () => { puppet.pause(); puppet.seek(Number(scrub.value) * take.duration); });
+      puppet.applyTake(0);
+    } else {
+      play.disabled = true;
+      scrub.disabled = true;
+    }
+    $("puppet-reset").addEventListener("click", () => puppet.reset());
+    const liveUrl = $("puppet-live-url");
+    $("puppet-live").addEventListener("click", () => { if (liveUrl.value) puppet.connect(liveUrl.value); });
+    say(`${model.F} triangles, ${model.morphs.length} parameters` + (take ? `, take of ${take.frames} frames` : "") +
+        ` (${viewer.kind})`);
+    const live = params.get("live");
+    if (live) { liveUrl.value = live; puppet.connect(live); }
+    else if (take && params.get("paused") === null) puppet.play();
+    puppet.render();
+    const loop = (now) => { puppet.tick(now); window.requestAnimationFrame(loop); };
+    window.requestAnimationFrame(loop);
+    document.documentElement.dataset.puppet = "ready";
+  }
+
+  start().catch((err) => {
+    say("Cannot play this puppet: " + err.message);
+    document.documentElement.dataset.puppet = "failed";
+  });
+})();
