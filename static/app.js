@@ -1,26 +1,32 @@
 // facesvg web UI: drag-and-drop upload, live job progress, result player. No framework; pages work without it.
 "use strict";
 
-function setupDrop() {
-  const drop = document.querySelector("[data-drop]");
-  const input = document.getElementById("file");
-  const label = document.getElementById("file-name");
-  if (!drop || !input) return;
-  const show = () => { label.textContent = input.files.length ? input.files[0].name : ""; };
+// A drop zone (the face's, the take's) puts a dropped file into its file input, as choosing one would.
+function setupDrop(zone, input, label) {
+  if (!zone || !input) return;
+  const show = () => { if (label) label.textContent = input.files.length ? input.files[0].name : ""; };
   input.addEventListener("change", show);
-  ["dragenter", "dragover"].forEach((t) => drop.addEventListener(t, (e) => {
-    e.preventDefault(); drop.classList.add("dragover");
+  ["dragenter", "dragover"].forEach((t) => zone.addEventListener(t, (e) => {
+    e.preventDefault(); zone.classList.add("dragover");
   }));
-  ["dragleave", "drop"].forEach((t) => drop.addEventListener(t, () => drop.classList.remove("dragover")));
-  drop.addEventListener("drop", (e) => {
+  ["dragleave", "drop"].forEach((t) => zone.addEventListener(t, () => zone.classList.remove("dragover")));
+  zone.addEventListener("drop", (e) => {
     e.preventDefault();
+    e.stopPropagation();
     if (e.dataTransfer && e.dataTransfer.files.length) {
       input.files = e.dataTransfer.files;
       input.dispatchEvent(new Event("change", { bubbles: true })); // the name and the size check, as on choosing
       document.getElementById("convert").focus();
     }
   });
-  // A file dropped outside the zone must not navigate away from the form.
+}
+
+function setupDrops() {
+  setupDrop(document.querySelector("[data-drop]"), document.getElementById("file"),
+    document.getElementById("file-name"));
+  setupDrop(document.querySelector("[data-drop-take]"), document.getElementById("file-weights"),
+    document.getElementById("take-name"));
+  // A file dropped outside the zones must not navigate away from the form.
   window.addEventListener("dragover", (e) => e.preventDefault());
   window.addEventListener("drop", (e) => e.preventDefault());
 }
@@ -83,8 +89,8 @@ function showStanding(job) {
   if (place) place.textContent = job.queue_position ? `Place in the queue: ${job.queue_position}` : "";
   if (eta) {
     const s = job.eta_seconds;
-    eta.textContent = s === null || s === undefined ? ""
-      : `Done in about ${s < 90 ? Math.max(Math.round(s), 1) + " s" : Math.round(s / 60) + " min"}`;
+    if (s === null || s === undefined) eta.textContent = job.estimating ? "Time left: estimating…" : "";
+    else eta.textContent = `Done in about ${s < 90 ? Math.max(Math.round(s), 1) + " s" : Math.round(s / 60) + " min"}`;
   }
 }
 
@@ -151,6 +157,181 @@ function setupForm() {
     const values = JSON.parse(refill.textContent || "{}");
     Object.entries(values).forEach(([k, v]) => setField(form, k, v));
   }
+}
+
+const INSPECT_MAX_BYTES = 64 * 1048576; // larger faces are not sent twice just for suggestions
+
+// What a chosen file is (the server reads it: /api/v1/inspect): a face's clips, parts and nodes become the text
+// options' suggestions, and the page says what the face can be driven by; a take is named with its layout.
+function setupInspect() {
+  const form = document.getElementById("upload-form");
+  if (!form || !form.dataset.inspectUrl) return;
+  const face = document.getElementById("file");
+  const take = document.getElementById("file-weights");
+  const faceInfo = document.getElementById("face-info");
+  const takeInfo = document.getElementById("take-info");
+  let asked = 0;
+  async function inspect(file, role) {
+    const body = new FormData();
+    body.append("file", file, file.name);
+    if (role) body.append("role", role);
+    const r = await fetch(form.dataset.inspectUrl, { method: "POST", body, headers: { Accept: "application/json" } });
+    let answer = null;
+    try { answer = await r.json(); } catch (err) { answer = null; }
+    if (!r.ok) throw new Error((answer && answer.error) || `the server could not read it (HTTP ${r.status})`);
+    return answer;
+  }
+  function say(box, text, bad) {
+    if (!box) return;
+    box.textContent = text;
+    box.classList.toggle("bad", Boolean(bad));
+  }
+  function fill(name, values) {
+    const input = form.querySelector(`input[data-suggest="${name}"]`);
+    const list = input && document.getElementById(input.getAttribute("list"));
+    if (!list) return;
+    list.querySelectorAll("option[data-from-file]").forEach((o) => o.remove());
+    values.forEach(([value, label]) => {
+      const option = document.createElement("option");
+      option.value = value;
+      if (label) option.label = label;
+      option.dataset.fromFile = "1";
+      list.appendChild(option);
+    });
+    input.dataset.suggestions = String(values.length);
+  }
+  function takeText(t) {
+    return `${t.layout} take: ${t.frames} frames at ${t.fps} fps (${Number(t.duration).toFixed(1)} s), `
+      + `${t.names} weights.`;
+  }
+  function faceText(f) {
+    const parts = [];
+    const clips = f.animations || [];
+    if (clips.length) {
+      parts.push(`${clips.length} clip${clips.length > 1 ? "s" : ""}: `
+        + clips.map((c) => c.name || `#${c.index}`).join(", ") + ".");
+    }
+    if (f.morph_targets) {
+      const still = !clips.length && f.frames === 1;
+      parts.push(`${f.morph_targets} morph targets` + (still
+        ? ", nothing animates them: add a take to drive them, or the result is a still (one frame)."
+        : ": a take can drive them."));
+    }
+    return parts.join(" ");
+  }
+  if (face) face.addEventListener("change", async () => {
+    const file = face.files[0];
+    const ticket = ++asked;
+    fill("animations", []); fill("frame_on", []);
+    say(faceInfo, "");
+    if (!file || file.size > INSPECT_MAX_BYTES) return;
+    say(faceInfo, "Reading the face…");
+    try {
+      const info = await inspect(file);
+      if (ticket !== asked) return;
+      if (info.kind === "take") { // a take dropped on the face: it belongs beside it
+        if (take) {
+          take.files = face.files;
+          take.dispatchEvent(new Event("change", { bubbles: true }));
+          face.value = "";
+          face.dispatchEvent(new Event("change", { bubbles: true }));
+          say(faceInfo, `“${file.name}” is a take, not a face: it was put in “A take”. Choose the face it drives.`);
+        } else {
+          say(faceInfo, `“${file.name}” is a take, not a face.`, true);
+        }
+        return;
+      }
+      fill("animations", (info.animations || []).map((c) => [c.name || String(c.index),
+        c.name ? `clip ${c.index}` : "unnamed clip"]));
+      fill("frame_on", (info.frame_on || []).map((n) => [n, ""]));
+      say(faceInfo, faceText(info));
+    } catch (err) {
+      if (ticket === asked) say(faceInfo, err.message, true);
+    }
+  });
+  if (take) take.addEventListener("change", async () => {
+    const file = take.files[0];
+    say(takeInfo, "");
+    if (!file || file.size > INSPECT_MAX_BYTES) return;
+    try {
+      const info = await inspect(file, "take");
+      if (info.kind !== "take") say(takeInfo, `“${file.name}” is a face, not a take: put it in “A face”.`, true);
+      else say(takeInfo, takeText(info));
+    } catch (err) {
+      say(takeInfo, err.message, true);
+    }
+  });
+}
+
+// A large result draws half-finished for seconds: say it is loading until its load event.
+function setupLoading() {
+  const note = document.getElementById("view-loading");
+  const view = document.querySelector("#stage object, #stage iframe");
+  if (!note || !view) return;
+  const done = () => { note.hidden = true; };
+  view.addEventListener("load", done);
+  view.addEventListener("error", () => { note.textContent = "The result could not be shown; download it below."; });
+  const doc = view.contentDocument;
+  if (doc && doc.readyState === "complete" && doc.URL !== "about:blank") done();
+}
+
+// The playing time (s) of an output's own player in a frame, from the API it exposes (the WebGL player's
+// facesvgPlayer, the 2D package's fap2dPlayer, the puppet's puppet), or null while it has none.
+function playerTime(win) {
+  if (!win) return null;
+  for (const name of ["facesvgPlayer", "fap2dPlayer", "puppet"]) {
+    const p = win[name];
+    if (!p) continue;
+    if (typeof p.time === "number" && Number.isFinite(p.time)) return p.time;
+    if (typeof p.frame === "number" && p.fps > 0) return p.frame / p.fps;
+  }
+  return null;
+}
+
+// One player per result: an output with its own player (HTML, 2D package) keeps its controls; the frame is
+// sized to the player so they are never cut off, and the 3D prerender follows the player's clock.
+function setupFramedPlayer() {
+  const player = document.getElementById("player");
+  const frame = document.querySelector("#stage iframe");
+  if (!player || !frame || player.dataset.viewer !== "frame") return;
+  const fps = parseFloat(player.dataset.fps) || 30;
+  const frames = parseInt(player.dataset.frames, 10) || 1;
+  const previews = JSON.parse(player.dataset.previews || "[]");
+  const base = player.dataset.previewBase;
+  const img = document.getElementById("prerender");
+  const prLabel = document.getElementById("prerender-label");
+  previews.forEach((k) => { const i = new Image(); i.src = base + k; });
+  let shown = previews.length ? previews[0] : -1;
+  function fit() {
+    const doc = frame.contentDocument;
+    if (!doc || !doc.documentElement) return;
+    // The body's height, not the document's: that is at least the frame's own, so it could only grow.
+    const h = doc.body ? Math.ceil(doc.body.getBoundingClientRect().height) : 0;
+    if (h > 0) frame.style.height = `${h}px`;
+  }
+  function follow() {
+    const t = playerTime(frame.contentWindow);
+    if (t !== null && img && previews.length) {
+      const k = Math.min(Math.max(Math.round(t * fps), 0), frames - 1);
+      let best = previews[0];
+      for (const p of previews) if (Math.abs(p - k) < Math.abs(best - k)) best = p;
+      if (best !== shown) { img.src = base + best; shown = best; }
+      prLabel.textContent = best === k ? `frame ${best}` : `frame ${best} (nearest rendered to ${k})`;
+      player.dataset.followed = String(k);
+    }
+    requestAnimationFrame(follow);
+  }
+  function attach() {
+    const body = frame.contentDocument && frame.contentDocument.body;
+    if (body) body.style.textAlign = "center"; // a player narrower than the frame sits in its middle
+    fit();
+    const doc = frame.contentDocument;
+    if (doc && doc.body && window.ResizeObserver) new ResizeObserver(fit).observe(doc.body);
+  }
+  frame.addEventListener("load", attach);
+  if (frame.contentDocument && frame.contentDocument.readyState === "complete") attach();
+  window.addEventListener("resize", fit);
+  requestAnimationFrame(follow);
 }
 
 function setupPlayer() {
@@ -233,4 +414,6 @@ function setupPlayer() {
   }
 }
 
-document.addEventListener("DOMContentLoaded", () => { setupDrop(); setupForm(); setupProgress(); setupPlayer(); });
+document.addEventListener("DOMContentLoaded", () => {
+  setupDrops(); setupForm(); setupInspect(); setupProgress(); setupLoading(); setupPlayer(); setupFramedPlayer();
+});

@@ -11,6 +11,7 @@ from converter.errors import InputError
 from converter.outputs import OUTPUTS, output_files
 from webapp import strictjson
 from webapp.eta import standing
+from webapp.inspect import inspect_upload
 from webapp.jobstore import DONE, Job, damaged
 from webapp.messages import user_words
 from webapp.openapi import openapi_document
@@ -55,6 +56,7 @@ def job_json(job: Job) -> dict:
         "percent": int(job.progress * 100),
         "error": user_words(job.message) if job.state == "failed" else None,
         "filename": job.filename,
+        "files": dict(job.names) or {"input": job.filename},  # role -> the user's file name (input, weights, ...)
         "input_kind": job.kind,
         "options": job.options,
         "created": job.created,
@@ -119,6 +121,21 @@ def post_job():
     response.status_code = 202
     response.headers["Location"] = url_for("api.get_job", job_id=job.id)
     return response
+
+
+@api.post("/inspect")
+def inspect():
+    """Describe an uploaded file without converting it: a face's clips, parts, nodes and morph targets, or a
+    take's layout (the upload form's suggestions)."""
+    upload = request.files.get("file")
+    if upload is None or not upload.filename:
+        return jsonify(error="send the file to describe in the field 'file'.", status=400), 400
+    try:
+        summary = inspect_upload(upload, int(current_app.config["FACESVG_MAX_UNZIPPED_MB"]) << 20,
+                                 request.form.get("role", ""))
+    except InputError as exc:
+        return jsonify(error=user_words(str(exc)), status=400), 400
+    return jsonify(summary)
 
 
 @api.get("/jobs/<job_id>")

@@ -35,6 +35,7 @@ class Job:
     kind: str = ""  # sniffed input kind
     options: dict = field(default_factory=dict)  # scalar ConversionOptions fields as submitted
     files: dict = field(default_factory=dict)  # role (input, cache, fap, ...) -> generated stored name
+    names: dict = field(default_factory=dict)  # role -> the user's file name of that upload (display only)
     created: float = 0.0
     started: float | None = None
     finished: float | None = None
@@ -52,7 +53,7 @@ class Job:
 
 
 COLUMNS = tuple(f.name for f in fields(Job))
-JSON_COLUMNS = ("options", "files", "result", "progress_origin")
+JSON_COLUMNS = ("options", "files", "names", "result", "progress_origin")
 TEXT_COLUMNS = ("id", "state", "stage", "message", "filename", "kind", "owner", "client")
 NUMBER_COLUMNS = {"progress": 0.0, "created": 0.0, "started": None, "finished": None, "lease": 0.0}
 
@@ -224,11 +225,12 @@ class SQLiteStore(JobStore):
                 "CREATE TABLE IF NOT EXISTS jobs (id TEXT PRIMARY KEY, state TEXT, stage TEXT, progress REAL, "
                 "message TEXT, filename TEXT, kind TEXT, options TEXT, files TEXT, created REAL, started REAL, "
                 "finished REAL, attempts INTEGER, result TEXT, owner TEXT DEFAULT '', lease REAL DEFAULT 0, "
-                "client TEXT DEFAULT '', progress_origin TEXT DEFAULT '{}')"
+                "client TEXT DEFAULT '', progress_origin TEXT DEFAULT '{}', names TEXT DEFAULT '{}')"
             )
             have = {r[1] for r in db.execute("PRAGMA table_info(jobs)")}
             for column, decl in (("owner", "TEXT DEFAULT ''"), ("lease", "REAL DEFAULT 0"),
-                                 ("client", "TEXT DEFAULT ''"), ("progress_origin", "TEXT DEFAULT '{}'")):
+                                 ("client", "TEXT DEFAULT ''"), ("progress_origin", "TEXT DEFAULT '{}'"),
+                                 ("names", "TEXT DEFAULT '{}'")):
                 if column not in have:  # a table written before these existed
                     db.execute(f"ALTER TABLE jobs ADD COLUMN {column} {decl}")
             db.execute("CREATE INDEX IF NOT EXISTS jobs_created ON jobs (created)")

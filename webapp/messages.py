@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 
 # The upload form's label of each option (templates/upload.html); a flag not listed reads as its plain words.
 LABELS = {
@@ -14,9 +15,12 @@ LABELS = {
     "rigid": "Factor rigid head motion", "ortho": "Orthographic camera", "raw": "Every frame, no keyframe reduction",
     "cache": "Point cache", "fap": "FAP stream", "fdp": "FDP file", "clone-target": "Clone onto face",
     "clone-method": "Cloning method", "clone-keys": "Key models", "correspondences": "Correspondences",
-    "svgz": "SVGZ", "output": "output file", "o": "output file",
+    "svgz": "SVGZ", "output": "output file", "o": "output file", "frame-on": "Frame on part or node",
+    "animation": "Animation", "weights": "Take", "preset": "Preset", "color-tolerance": "Colour tolerance",
+    "max-animations": "Animated element budget",
 }
-FLAG = re.compile(r"(?<![\w-])--?([a-z][a-z0-9]*(?:-[a-z0-9]+)*)\b")
+# A flag with its placeholder ("--frame-on NAME", "--end N"): the placeholder goes with the flag.
+FLAG = re.compile(r"(?<![\w-])--?([a-z][a-z0-9]*(?:-[a-z0-9]+)*)\b(?: [A-Z]{1,5}(?:\|\w+)*\b(?![\w-]))?")
 BARE = re.compile(r"\b(max-triangles|neutral-frame|clone-method|clone-target|clone-keys|depth-layers)\b")
 
 
@@ -30,3 +34,17 @@ def user_words(message: str) -> str:
     text = FLAG.sub(lambda m: f"“{label(m.group(1))}”" if m.group(0).startswith("--") or m.group(1) in LABELS
                     else m.group(0), message)
     return BARE.sub(lambda m: f"“{label(m.group(1))}”", text)
+
+
+def with_user_names(message: str, stored: Mapping[str, str], names: Mapping[str, str]) -> str:
+    """The message with each upload's generated name (and any folder before it) replaced by the user's file name:
+    a refused take is "“my take.csv”", not "weights.json"."""
+    for role, generated in stored.items():
+        name = names.get(role)
+        if not name or not generated:
+            continue
+        pattern = re.compile(r"(?:[^\s'\"“”]*[/\\]|(?<![\w.-]))" + re.escape(generated) + r"(?![\w.])")
+        quoted = re.compile(r"['\"“]" + pattern.pattern + r"['\"”]")
+        shown = f"“{name}”".replace("\\", "\\\\")  # a replacement string: backslashes are escapes
+        message = pattern.sub(shown, quoted.sub(shown, message))
+    return message

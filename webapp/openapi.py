@@ -66,7 +66,9 @@ def openapi_document() -> dict:
     return {
         "openapi": "3.1.0",
         "info": {"title": "facesvg API", "version": "1",
-                 "description": "Convert 3D facial animation to animated SVG or an MPEG-4 2D package. Jobs run "
+                 "description": "Convert 3D facial animation to "
+                                + ", ".join(f"{k.label} (to={k.name})" for k in OUTPUTS.values())
+                                + ". Jobs run "
                                 "in the background; poll GET /jobs/{job_id} until state is done or failed. "
                                 "DELETE cancels a queued job, removes a finished one, and asks a running one to "
                                 "stop (202; it is removed when its worker reaches the next progress step)."},
@@ -104,6 +106,22 @@ def openapi_document() -> dict:
                            "responses": {"204": {"description": "cancelled or deleted"},
                                          "202": {"description": "running; it stops at its next progress step"},
                                          "404": _error("no such job")}},
+            },
+            "/inspect": {
+                "post": {"summary": "Describe a face (clips, parts and nodes, morph targets) or a take (its capture "
+                                    "layout) without converting it", "operationId": "inspectUpload",
+                         "requestBody": {"required": True, "content": {"multipart/form-data": {"schema": {
+                             "type": "object", "properties": {"file": {
+                                 "type": "string", "format": "binary",
+                                 "description": "a face (as the file field of POST /jobs) or a take (as weights)"},
+                                 "role": {"type": "string", "enum": ["face", "take"],
+                                          "description": "read the file as this (default: by its content)"}},
+                             "required": ["file"]}}}},
+                         "responses": {"200": {"description": "kind (face or take); a face's animations (index, "
+                                                              "name), frame_on (parts and nodes), morph_targets; a "
+                                                              "take's layout, frames, fps; driven_by (the layouts)"},
+                                       "400": _error("no file, or a file facesvg cannot read"),
+                                       "413": _error(TOO_LARGE)}},
             },
             "/jobs/{job_id}/result": {
                 "parameters": [JOB_ID],
@@ -145,6 +163,8 @@ def openapi_document() -> dict:
                                                      "cancelled"]},
                 "stage": {"type": "string"}, "progress": {"type": "number"}, "percent": {"type": "integer"},
                 "error": {"type": ["string", "null"]}, "filename": {"type": "string"},
+                "files": {"type": "object", "description": "the user's file name of each upload by field: input "
+                                                           "(the face), weights (the take), ..."},
                 "input_kind": {"type": "string"}, "options": {"type": "object", "properties": _option_schema()},
                 "created": {"type": "number"}, "started": {"type": ["number", "null"]},
                 "finished": {"type": ["number", "null"]},
@@ -152,7 +172,10 @@ def openapi_document() -> dict:
                                    "description": "1 for the next job to start; null unless queued"},
                 "eta_seconds": {"type": ["number", "null"],
                                 "description": "estimated seconds until done, from the stage progress and recent "
-                                               "jobs; null when finished"},
+                                               "jobs; null when finished or while estimating"},
+                "estimating": {"type": "boolean",
+                               "description": "true while an active job's ETA has no basis yet (too little "
+                                              "progress measured, or no job has finished on this server)"},
                 "result": {"type": "object", "description": "report, frames, fps, duration, preview_frames, "
                                                             "outputs (bytes per kind)"},
                 "links": {"type": "object"}}},

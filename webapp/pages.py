@@ -5,20 +5,21 @@ from __future__ import annotations
 import logging
 import math
 from datetime import UTC, datetime
+from urllib.parse import quote
 
 from flask import Blueprint, abort, current_app, flash, g, redirect, render_template, request, url_for
 
 from converter.errors import InputError
 from converter.formats import captures
 from converter.options import option_fields
-from converter.outputs import choices, output_files
+from converter.outputs import OUTPUTS, choices, output_files
 from converter.playcost import playback_class
 from webapp.eta import standing
 from webapp.jobstore import DONE, damaged
 from webapp.limits import size_text, upload_limit
 from webapp.messages import user_words
 from webapp.openapi import openapi_document
-from webapp.presets import PRESETS, estimate_sizes
+from webapp.presets import PRESETS, estimate_sizes, has_preset
 from webapp.security import may_see
 from webapp.storage import is_job_id
 from webapp.submit import OPTION_FIELDS, create_job
@@ -79,12 +80,58 @@ def form_fields() -> list[dict]:
         if not meta.form:
             continue
         offered = choices(spec)
-        widget = "file" if meta.path else "select" if offered else "check" if spec.type is bool else "number"
+        widget = "file" if meta.path else "select" if offered else "check" if spec.type is bool else \
+            "text" if spec.type is str else "number"
         out.append({"name": spec.name, "label": meta.label or spec.name, "widget": widget, "value": spec.default,
                     "choices": dict(offered or {}), "min": meta.minimum, "max": meta.maximum,
-                    "step": 1 if spec.type is int else "any", "placeholder": meta.unset, "hint": meta.help,
+                    "step": 1 if spec.type is int else "any", "placeholder": meta.unset,
+                    "hint": WEB_HINTS.get(spec.name, meta.help),
                     "accept": file_accept(spec.name, meta.accept), "advanced": meta.advanced})
     return out
+
+
+# Hints in the form's words where the option's help speaks of the command line.
+WEB_HINTS = {
+    "animation": "a clip's name or number, or all (every clip together); the face you choose lists its clips here",
+    "frame_on": "frame only this part or glTF node or mesh; the face you choose lists its parts and nodes here",
+    "weights": "a take from a face-capture app that drives the face's named morph targets",
+}
+# Where a text option's suggestions come from in /api/v1/inspect's answer (the upload form's datalists).
+SUGGESTIONS = {"animation": "animations", "frame_on": "frame_on"}
+# Output files without a browser view of their own, shown in a page of static/ that plays them.
+VIEWER_PAGES = {"fap2d": "fap2d.html"}
+# The result page's words for the report's figures: label, unit (a figure not listed reads as its key in words).
+FIGURES = {
+    "playback_ms_4x": ("Playback cost on a slow phone", "ms a frame"),
+    "keys_per_path": ("Keyframes per animated shape", ""),
+    "color_error_max_levels": ("Largest colour error", "levels of 255"),
+    "color_error_p99_levels": ("Colour error of 99 % of shapes, at most", "levels of 255"),
+    "budget_deviation_px": ("Largest shape change from the triangle budget", "px"),
+    "budget_deviation_mean_px": ("Mean shape change from the triangle budget", "px"),
+    "max_deviation_px": ("Largest drawing error, measured", "px"),
+    "mean_deviation_px": ("Mean drawing error, measured", "px"),
+    "tolerance_px": ("Drawing error allowed", "px"),
+    "within_tolerance": ("Drawing error within the allowed", ""),
+    "visibility_mismatches": ("Triangles shown or hidden wrongly", ""),
+}
+
+
+def figure_rows(figures: dict) -> list[tuple[str, str, str]]:
+    """(key, label, value with its unit) of each report figure, in the user's words, in FIGURES' order."""
+    rows = []
+    order = {k: i for i, k in enumerate(FIGURES)}
+    for key in sorted(figures, key=lambda k: (order.get(k, len(order)), k)):
+        value = figures[key]
+        if key.startswith("budget_deviation_px_"):  # one per part: "… from the triangle budget (skin)"
+            label, unit = f"{FIGURES['budget_deviation_px'][0]} ({key.rsplit('_', 1)[-1]})", "px"
+        else:
+            known = FIGURES.get(key)
+            bare, unit = (key[:-3], "px") if key.endswith("_px") else (key, "")
+            label, unit = known or (bare.replace("_", " ").capitalize(), unit)
+        text = ("yes" if value else "no") if isinstance(value, bool) else num(value, ".3g") \
+            if isinstance(value, float) else num(value)
+        rows.append((key, label, f"{text} {unit}" if unit and text != "—" else text))
+    return rows
 
 
 def file_accept(name: str, declared: str) -> str:
@@ -117,9 +164,11 @@ def _form(status: int = 200, error: str | None = None, refill: dict | None = Non
         if refill and control["name"] in refill and control["widget"] != "file":
             control["value"] = refill[control["name"]]
     limit = upload_limit(current_app.config)
+    take = next((c for c in controls if c["name"] == "weights"), None)
     return render_template("upload.html", fields=controls, refill=refill or {}, accept=ACCEPT,
                            cache_accept=CACHE_ACCEPT, error=error, presets=PRESETS, recent=_visible(8),
-                           max_bytes=limit, max_text=size_text(limit)), status
+                           max_bytes=limit, max_text=size_text(limit), take=take, layouts=captures.labels(),
+                           suggestions=SUGGESTIONS), status
 
 
 def _visible(limit: int) -> list:
@@ -170,7 +219,7 @@ def submit():
 @pages.get("/docs/api")
 def api_docs():
     """The OpenAPI document of /api/v1 as a readable page."""
-    return render_template("api.html", doc=openapi_document())
+    return render_template("api.html", doc=openapi_document(), outputs=OUTPUTS.values())
 
 
 @pages.get("/jobs")
@@ -195,16 +244,55 @@ def job_page(job_id: str):
 def _job_page(job) -> str:
     kinds = queue().storage.available(job.id) if job.state == DONE else []
     labels = {**{key: f.label for key, f in output_files().items()}, "report": "Report (JSON)"}
+    result = job.result or {}
+    report = result.get("report") or {}
+    frames = result.get("frames")
+    still = job.state == DONE and (result.get("still") is not None or frames == 1)
     return render_template("job.html", job=job, kinds=kinds, labels=labels, standing=standing(queue(), job),
                            error=user_words(job.message) if job.message else "",
-                           estimates=estimate_sizes(job) if job.state == DONE else [], playback=_playback(job))
+                           estimates=estimate_sizes(job) if job.state == DONE else [], playback=_playback(job),
+                           viewer=viewer(job, kinds) if job.state == DONE else None, still=still,
+                           undriven=still and not job.files.get("weights") and bool(result.get("morph_targets")),
+                           layouts=captures.labels(), figure_rows=figure_rows(report.get("figures") or {}),
+                           warnings=[user_words(w) for w in report.get("warnings") or []],
+                           is_mobile=has_preset(job, "mobile") if "mobile" in PRESETS else False,
+                           kind_label=_kind_label(job),
+                           option_labels={spec.name: spec.meta.label or spec.name for spec in option_fields()})
+
+
+def _kind_label(job) -> str:
+    """The job's output kind as the form names it."""
+    kind = OUTPUTS.get((job.options or {}).get("to", "svg"))
+    return kind.label if kind else str((job.options or {}).get("to", ""))
+
+
+def viewer(job, kinds: list[str]) -> dict | None:
+    """How the result page shows a finished job's main output, for any registered kind: an SVG inline ("svg"),
+    an HTML page or a static viewer page in a frame with the output's own controls ("frame"), or None."""
+    kind = OUTPUTS.get((job.options or {}).get("to", "svg"))
+    if kind is None:
+        return None
+    main = kind.files[0]
+    if main.key not in kinds:
+        return None
+    src = url_for("api.get_result_kind", job_id=job.id, kind=main.key)
+    if main.media_type == "image/svg+xml" and not main.gzip:
+        return {"type": "svg", "src": src, "label": kind.label}
+    if main.media_type == "text/html":
+        return {"type": "frame", "src": src, "label": kind.label}
+    if main.key in VIEWER_PAGES:
+        page = url_for("static", filename=VIEWER_PAGES[main.key])
+        return {"type": "frame", "src": f"{page}?src={quote(src, safe='')}", "label": kind.label}
+    return None
 
 
 def _playback(job) -> str:
-    """The playback class of a finished flat SVG job ('' when its report has no prediction)."""
+    """The predicted playback of a finished flat SVG job in words ('' when its report has no prediction)."""
     figures = ((job.result or {}).get("report") or {}).get("figures") or {}
     ms = figures.get("playback_ms_4x")
-    return playback_class(ms) if isinstance(ms, (int, float)) and math.isfinite(ms) else ""
+    if not isinstance(ms, (int, float)) or not math.isfinite(ms):
+        return ""
+    return f"{playback_class(ms)} ({num(float(ms), '.3g')} ms a frame on a slow phone)"
 
 
 @pages.post("/jobs/<job_id>/delete")

@@ -29,7 +29,7 @@ from converter.verify import verify_animation
 from webapp import strictjson
 from webapp.jobstore import CANCELLING, DONE, FAILED, RUNNING, Job, JobStore, is_damaged, open_store
 from webapp.lease import Heartbeat, new_owner
-from webapp.messages import user_words
+from webapp.messages import user_words, with_user_names
 from webapp.storage import Storage, result_files
 
 log = logging.getLogger("facesvg.webapp")
@@ -78,11 +78,11 @@ def execute(store: JobStore, storage: Storage, job_id: str, owner: str, lease_se
         except ClaimLost:
             return _discard(storage, job_id, owner, "claim lost while converting")
         except FacesvgError as exc:
-            return _fail(store, storage, job_id, owner, user_words(str(exc)))
+            return _fail(store, storage, job_id, owner, with_user_names(user_words(str(exc)), job.files, job.names))
         except Exception as exc:  # a bug or a resource failure: keep the server alive, tell the user plainly
             log.error("job %s failed:\n%s", job_id, traceback.format_exc())
-            return _fail(store, storage, job_id, owner,
-                         f"the conversion failed unexpectedly ({type(exc).__name__}: {exc}).")
+            return _fail(store, storage, job_id, owner, with_user_names(
+                f"the conversion failed unexpectedly ({type(exc).__name__}: {exc}).", job.files, job.names))
         if store.transition(job_id, (RUNNING,), holder=owner, state=DONE, stage="done", progress=1.0,
                             finished=time.time(), result=result, owner="", lease=0.0):
             record_event(storage, job_id, f"done {owner}")
@@ -214,6 +214,8 @@ def _finish(job: Job, storage: Storage, progress, preview_frames: int, options: 
     if kind.verify:
         progress("verify", CONVERT_SHARE)
         report["figures"].update(fidelity(main, anim))
+        if report["figures"].get("budget_within_bound") is False and "within_tolerance" in report["figures"]:
+            report["figures"]["within_tolerance"] = False  # the triangle budget moved the face past its bound
     report = strictjson.finite(report)  # a figure that could not be measured (NaN) is stored, and served, as null
     outputs["report"] = strictjson.dumps(report, indent=1, sort_keys=True).encode()
     files = result_files()
@@ -233,7 +235,19 @@ def _finish(job: Job, storage: Storage, progress, preview_frames: int, options: 
         "still": options.frame if still else None,  # the SVG shows this one frame, not the animation
         "outputs": {k: len(v) for k, v in outputs.items()},
         "media_type": result.media_type,
+        # a face with morph targets and no take to drive them: the page says a take can (its one frame is a still)
+        "morph_targets": morph_count(anim.extras.get("morph_targets")),
     }
+
+
+def morph_count(value) -> int:
+    """How many morph targets a loader reported: a list of their names or a count (loaders say either)."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return int(value)
+    try:
+        return len(value)
+    except TypeError:
+        return 0
 
 
 def fidelity(svg: bytes, anim) -> dict:

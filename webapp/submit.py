@@ -9,6 +9,7 @@ from werkzeug.datastructures import FileStorage, ImmutableMultiDict
 from werkzeug.utils import secure_filename
 
 from converter.errors import InputError
+from converter.formats import captures
 from converter.options import ConversionOptions, option_fields
 from converter.outputs import output_kind
 from webapp.jobstore import Job
@@ -69,6 +70,7 @@ def create_job(queue, config, form: ImmutableMultiDict, files: ImmutableMultiDic
             filename = upload.filename
         kind = check_main_input(tmp, max_unzipped)
         stored = {"input": stored_name("input", filename, kind)}
+        names = {"input": display_name(filename)}
         tmp.rename(inputs / stored["input"])
         for role in EXTRA_FIELDS:
             extra = files.get(role)
@@ -76,18 +78,31 @@ def create_job(queue, config, form: ImmutableMultiDict, files: ImmutableMultiDic
                 continue
             name = stored_name(role, extra.filename)
             extra.save(inputs / name)
-            check_extra(inputs / name, role, max_unzipped)
+            check_extra(inputs / name, "take" if role == "weights" else role, max_unzipped,
+                        display_name(extra.filename))
             if role == "clone_target":
                 check_main_input(inputs / name, max_unzipped)
+            if role == "weights":
+                check_take(inputs / name, display_name(extra.filename))
             stored[role] = name
+            names[role] = display_name(extra.filename)
         if kind == "obj" and "cache" not in stored:
             raise InputError("an OBJ mesh needs its animation: add a PC2 or MDD point cache file.")
     except BaseException:
         storage.delete(job_id)
         raise
-    job = Job(id=job_id, filename=display_name(filename), kind=kind, options=options, files=stored, client=client)
+    job = Job(id=job_id, filename=display_name(filename), kind=kind, options=options, files=stored, names=names,
+              client=client)
     queue.submit(job)
     return job
+
+
+def check_take(path: Path, name: str) -> None:
+    """InputError, naming the user's file, unless path holds a capture layout facesvg reads."""
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    if captures.detect(head) is None:
+        captures.parse_capture(path.read_bytes(), f"“{name}”")  # raises the reader's words (empty, bad JSON, ...)
 
 
 def display_name(filename: str) -> str:

@@ -41,12 +41,13 @@ def check_main_input(path: Path, max_unzipped: int) -> str:
     return kind
 
 
-def check_extra(path: Path, field: str, max_unzipped: int) -> None:
-    """Safety checks for an extra upload (zip archives are checked like the main input)."""
+def check_extra(path: Path, field: str, max_unzipped: int, shown: str = "") -> None:
+    """Safety checks for an extra upload (zip archives are checked like the main input); shown: the user's name."""
     with open(path, "rb") as fh:
         head = fh.read(4)
     if not head:
-        raise InputError(f"the uploaded {field.replace('_', ' ')} file is empty.")
+        what = f"“{shown}”" if shown else "file"
+        raise InputError(f"the uploaded {field.replace('_', ' ')} {what} is empty.")
     if head == b"PK\x03\x04":
         check_zip(path, max_unzipped)
 

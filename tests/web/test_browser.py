@@ -98,7 +98,7 @@ def test_drop_sample_watch_progress_play_and_download(browser, server, sample_fi
     assert page.text_content("#job-state") == "done"
     assert int(page.text_content("#fig-triangles").split()[0]) > 0
     assert "KB" in page.text_content("#fig-svg")
-    assert "max deviation px" in page.text_content("#fidelity")  # the verifier's figures are shown
+    assert "Largest drawing error, measured" in page.text_content("#fidelity")  # the verifier's figures are shown
     page.wait_for_function("document.getElementById('svg-view').contentDocument?.documentElement?.tagName === 'svg'")
     page.screenshot(path=str(artifacts / "web_result.png"), full_page=True)
 

@@ -117,6 +117,10 @@ def test_every_option_is_in_the_upload_form_with_its_default_choices_and_range(w
         elif e["bool"]:
             assert el.get("type") == "checkbox", e["name"]
             assert (el.get("checked") is not None) == e["default"], e["name"]
+        elif e["type"] == "str":  # a name (a clip, a part or node): typed, with suggestions from the file
+            assert el.get("type") == "text", e["name"]
+            assert form.find(f".//datalist[@id='{el.get('list')}']") is not None, e["name"]
+            assert el.get("value") == ("" if e["default"] is None else str(e["default"])), e["name"]
         else:
             assert el.get("type") == "number", e["name"]
             assert el.get("value") == ("" if e["default"] is None else str(e["default"])), e["name"]

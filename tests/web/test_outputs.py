@@ -109,3 +109,20 @@ def test_a_job_sets_its_3d_frames_aside_while_the_writer_runs(tmp_path, monkeypa
     assert alive == [False] and verified == [True]
     assert job.result["report"]["figures"]["within_tolerance"] and job.result["preview_frames"]
     assert sorted(p.name for p in storage.job_dir(job_id).iterdir()) == ["events.log", "inputs", "out"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("app", ["embedded"], indirect=True)
+def test_puppet_job_with_a_take_is_served_with_its_own_player(client):
+    take = SMALL_DATA / "captures" / "livelinkface_myslate3_cut.csv"
+    r = client.post("/api/v1/jobs", data={
+        "file": (io.BytesIO(SAMPLE.read_bytes()), "face.glb"), "to": "puppet", "size": "128",
+        "weights": (io.BytesIO(take.read_bytes()), "MySlate_3.csv"),
+    }, content_type="multipart/form-data")
+    assert r.status_code == 202, r.get_json()
+    job = wait_job(client, r.get_json()["id"], timeout=240)
+    assert job["state"] == "done", job["error"]
+    html = client.get(job["links"]["result"])
+    assert html.mimetype == "text/html" and b"window.puppet" in html.data
+    page = client.get(job["links"]["page"]).get_data(as_text=True)
+    assert 'data-viewer="frame"' in page and "MySlate_3.csv" in page

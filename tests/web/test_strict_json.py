@@ -83,8 +83,8 @@ def test_a_nan_report_is_served_as_strict_json_everywhere(app, client):
     page = client.get(f"/jobs/{NAN_ID}").get_data(as_text=True)
     assert 'id="player"' in page and no_nan(page), re.findall(r".{40}\bnan\b.{20}", page, re.I)
     figures_html = page.split('id="fidelity"')[1].split("</dl>")[0]
-    assert re.search(r"budget deviation mean px</dt><dd>—</dd>", figures_html)
-    assert re.search(r"max deviation px</dt><dd>0.25</dd>", figures_html)
+    assert re.search(r"Mean shape change from the triangle budget</dt><dd[^>]*>—</dd>", figures_html)
+    assert re.search(r"Largest drawing error, measured</dt><dd[^>]*>0.25 px</dd>", figures_html)
     assert no_nan(client.get("/jobs").get_data(as_text=True)) and no_nan(client.get("/").get_data(as_text=True))
 
 
@@ -253,7 +253,8 @@ def test_browser_a_job_that_finishes_with_nan_shows_its_finished_state(browser, 
         assert page.text_content("#job-state") == "done"
         text = page.inner_text("body")
         assert no_nan(text), text
-        assert "budget deviation mean px</dt><dd>—</dd>" in page.inner_html("#fidelity")
+        figures = page.inner_html("#fidelity")
+        assert re.search(r"Mean shape change from the triangle budget</dt><dd[^>]*>—</dd>", figures)
         page.screenshot(path=str(artifacts / "web_nan_job.png"), full_page=True)
     finally:
         page.close()
