@@ -34,7 +34,7 @@ CASES = {  # label: (face, options)
     "capture-like face, WebGL player": ("capture", {"to": "player"}),
     "8k x 1,000 bench face, flat SVG": ("8k1000", {}),
     "ICT head driven by a 1,000-frame ARKit capture, flat SVG (50,996 x 1,000)": ("arkit1000", {}),
-    "the same capture, mobile preset (triangle budget 850)": ("arkit1000", {"preset": "mobile"}),
+    "the same capture, mobile preset (bounded triangle budget)": ("arkit1000", {"preset": "mobile"}),
 }
 AT = (0.25, 0.5, 0.75)  # points of the run where the shown ETA is read
 OLD_STAGE = (0.1, 0.6)  # where the 2D stage's progress went before (now 0.1 .. convert.WRITE_FROM)
