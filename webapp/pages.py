@@ -108,12 +108,16 @@ FIGURES = {
     "color_error_p99_levels": ("Colour error of 99 % of shapes, at most", "levels of 255"),
     "budget_deviation_px": ("Largest shape change from the triangle budget", "px"),
     "budget_deviation_mean_px": ("Mean shape change from the triangle budget", "px"),
+    "budget_bound_px": ("Largest shape change the triangle budget may make", "px"),
+    "budget_bound_mean_px": ("Mean shape change the triangle budget may make", "px"),
+    "budget_within_bound": ("Triangle budget within its bound, no visible part lost", ""),
     "max_deviation_px": ("Largest drawing error, measured", "px"),
     "mean_deviation_px": ("Mean drawing error, measured", "px"),
     "tolerance_px": ("Drawing error allowed", "px"),
     "within_tolerance": ("Drawing error within the allowed", ""),
     "visibility_mismatches": ("Triangles shown or hidden wrongly", ""),
 }
+KEPT = "budget_coverage_kept_"  # + a part's label: the share of its frame-0 pixels the triangle budget kept
 
 
 def figure_rows(figures: dict) -> list[tuple[str, str, str]]:
@@ -124,6 +128,10 @@ def figure_rows(figures: dict) -> list[tuple[str, str, str]]:
         value = figures[key]
         if key.startswith("budget_deviation_px_"):  # one per part: "… from the triangle budget (skin)"
             label, unit = f"{FIGURES['budget_deviation_px'][0]} ({key.rsplit('_', 1)[-1]})", "px"
+        elif key.startswith(KEPT) and isinstance(value, (int, float)) and not isinstance(value, bool):
+            label = f"Pixels of {key.removeprefix(KEPT)} still shown after the triangle budget"
+            rows.append((key, label, f"{num(100 * value, '.3g')} %"))
+            continue
         else:
             known = FIGURES.get(key)
             bare, unit = (key[:-3], "px") if key.endswith("_px") else (key, "")

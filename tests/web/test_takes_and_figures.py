@@ -185,3 +185,14 @@ def test_the_mobile_estimate_is_within_a_quarter_of_what_the_preset_makes_of_the
     (estimate,) = estimate_sizes(job)
     assert estimate["name"] == "mobile"
     assert abs(estimate["svg"] / made["mobile"][0] - 1) <= 0.25, (estimate, made["mobile"][0])
+
+
+def test_triangle_budget_figures_read_in_words():
+    from webapp.pages import figure_rows
+
+    rows = {k: (label, text) for k, label, text in figure_rows(
+        {"budget_coverage_kept_Wolf3D_Hair": 0.953, "budget_within_bound": False, "budget_bound_px": 5.0})}
+    assert rows["budget_coverage_kept_Wolf3D_Hair"] == ("Pixels of Wolf3D_Hair still shown after the triangle budget",
+                                                        "95.3 %")
+    assert rows["budget_within_bound"][1] == "no" and rows["budget_bound_px"][1] == "5 px"
+    assert not any("_" in label for label, _ in rows.values() if "Wolf3D" not in label)
