@@ -11,7 +11,8 @@
   const GOURAUD = 1;
   const WIDE = 2;
   const HEAD = 4;
-  const STROKE_PX = 0.5; // the SVG's seam stroke (svg_anim.STROKE_PX)
+  const STROKE_PX = 0.6; // the SVG's seam stroke (svg_anim.STROKE_PX), which only the canvas 2D fallback draws
+  const SLIVER_PX = 1; // ... nor on an edge to a path at the outline narrower than this across it (seen edge-on)
   const SLOW_WINDOW = 30; // played frames judged together for multisampling
   const SLOW_FPS = 45; // below this median frame rate the player drops multisampling
   const LATE_SHARE = 0.05; // ... as it does when more of the last 2 * SLOW_WINDOW frames than this came late
@@ -257,8 +258,11 @@
 
   // Renderers: frame(f, w) draws frame f + w (0 <= w <= 1) of the decoded animation.
   // WebGL 2 evaluates the animation on the GPU: the expanded tracks, colours and visibility are textures, each
-  // corner's vertex shader interpolates its triangle's three vertices, grows it like grow() below and drops it
-  // when hidden, so a frame costs the script two uniforms. The other renderers take the corners from cpuFrames().
+  // corner's vertex shader interpolates its vertex and drops its triangle when hidden, so a frame costs the script
+  // two uniforms. The other renderers take the corners from cpuFrames().
+  // WebGL draws the triangles as they are, no seam stroke and no growing: its rasterisation of triangles that share
+  // an edge is watertight (a pixel or sample is covered by exactly one of them), so no seam shows between
+  // neighbours, multisampled or not, and the silhouette is three.js's.
   const GL2_VS = `#version 300 es
 precision highp float;
 precision highp int;
@@ -272,8 +276,7 @@ uniform int nc;
 uniform int np;
 uniform bool gouraud;
 uniform vec2 s;
-uniform float half_px;
-in uvec3 tri; // this corner's vertex, the next and the previous one of its triangle
+in uint vid; // this corner's vertex
 out vec4 v;
 ivec2 at(int i, int width) { return ivec2(i % width, i / width); }
 vec2 pos(uint id) {
@@ -288,10 +291,6 @@ vec3 colour(int track) {
   vec3 a = texelFetch(rgb, at(i, width), 0).rgb * 255.0;
   return floor(a + w * (texelFetch(rgb, at(i + nc, width), 0).rgb * 255.0 - a) + 0.5) / 255.0;
 }
-bool usable(vec2 u, vec2 t) { // grow()'s conditions at one corner (unit edges u, t)
-  vec2 b = u + t;
-  return length(b) > 1e-9 && sqrt(max(0.0, (1.0 - dot(u, t)) / 2.0)) > 1e-9;
-}
 void main() {
   int path = gl_VertexID / 3;
   if (texelFetch(shown, at(f * np + path, textureSize(shown, 0).x), 0).r == 0.0) { // 1 (shown) reads 1/255
@@ -299,19 +298,8 @@ void main() {
     v = vec4(0.0);
     return;
   }
-  vec2 a = pos(tri.x), b = pos(tri.y), c = pos(tri.z);
-  vec2 e = b - a, g = c - b, h = a - c;
-  float le = length(e), lg = length(g), lh = length(h);
-  vec2 q = a;
-  if (le > 1e-9 && lg > 1e-9 && lh > 1e-9) {
-    e /= le; g /= lg; h /= lh;
-    if (usable(e, -h) && usable(g, -e) && usable(h, -g)) {
-      vec2 bis = e - h;
-      float sinHalf = sqrt(max(0.0, (1.0 - dot(e, -h)) / 2.0));
-      q = a - bis * (min(half_px / sinHalf, 2.0 * half_px) / length(bis));
-    }
-  }
-  v = vec4(colour(gouraud ? int(tri.x) : path), 1.0);
+  vec2 q = pos(vid);
+  v = vec4(colour(gouraud ? int(vid) : path), 1.0);
   gl_Position = vec4(q.x * s.x - 1.0, 1.0 - q.y * s.y, 0.0, 1.0);
 }`;
   const GL2_FS = `#version 300 es
@@ -378,21 +366,14 @@ void main() { o = v; }`;
         !texture(2, gl.R8, gl.RED, gl.UNSIGNED_BYTE, shown, 1)) {
       return null;
     }
-    // Per corner: its vertex, then the next and previous vertex of its triangle.
     const p = h.paths;
-    const tri = new Uint32Array(9 * p);
-    for (let j = 0; j < p; j++) {
-      for (let c = 0; c < 3; c++) {
-        for (let k = 0; k < 3; k++) tri[9 * j + 3 * c + k] = pathVertices[3 * j + (c + k) % 3];
-      }
-    }
     gl.useProgram(prog);
     const buf = gl.createBuffer();
     gl.bindBuffer(gl.ARRAY_BUFFER, buf);
-    gl.bufferData(gl.ARRAY_BUFFER, tri, gl.STATIC_DRAW);
-    const tLoc = gl.getAttribLocation(prog, "tri");
-    gl.enableVertexAttribArray(tLoc);
-    gl.vertexAttribIPointer(tLoc, 3, gl.UNSIGNED_INT, 0, 0);
+    gl.bufferData(gl.ARRAY_BUFFER, pathVertices, gl.STATIC_DRAW); // per corner: its vertex
+    const vLoc = gl.getAttribLocation(prog, "vid");
+    gl.enableVertexAttribArray(vLoc);
+    gl.vertexAttribIPointer(vLoc, 1, gl.UNSIGNED_INT, 0, 0);
     const u = (name) => gl.getUniformLocation(prog, name);
     gl.uniform1i(u("xy"), 0);
     gl.uniform1i(u("rgb"), 1);
@@ -402,7 +383,6 @@ void main() { o = v; }`;
     gl.uniform1i(u("np"), p);
     gl.uniform1i(u("gouraud"), gouraud ? 1 : 0);
     gl.uniform2f(u("s"), 2 / h.width, 2 / h.height);
-    gl.uniform1f(u("half_px"), HALF);
     const fLoc = u("f");
     const wLoc = u("w");
     gl.disable(gl.DEPTH_TEST); // painter's order: later triangles cover earlier ones
@@ -516,17 +496,73 @@ void main() { o = v; }`;
     };
   }
 
-  // Canvas 2D: flat triangles with the SVG's seam stroke; Gouraud falls back to each triangle's mean colour.
-  function canvasRenderer(cv, width, height) {
+  // Per path edge (3 * path + i: corner i to i + 1) the same edge of the one other path that shares it, -1 on a
+  // boundary or where three or more share it. Vertices that coincide in every frame (a mesh split along UV or
+  // normal seams) are welded first: compared at the first, middle and last frame, as the player holds them.
+  function edgePartners(anim) {
+    const { h, pathVertices, xy } = anim;
+    const nv = h.vertices;
+    const weld = new Int32Array(nv);
+    const seen = new Map();
+    for (let v = 0; v < nv; v++) {
+      let key = "";
+      for (const f of [0, h.frames >> 1, h.frames]) key += xy[2 * (f * nv + v)] + "," + xy[2 * (f * nv + v) + 1] + ";";
+      if (!seen.has(key)) seen.set(key, v);
+      weld[v] = seen.get(key);
+    }
+    const partner = new Int32Array(3 * h.paths).fill(-1);
+    const first = new Map();
+    for (let k = 0; k < 3 * h.paths; k++) {
+      const j = k - (k % 3);
+      const a = weld[pathVertices[k]];
+      const b = weld[pathVertices[j + ((k % 3) + 1) % 3]];
+      const key = Math.min(a, b) * nv + Math.max(a, b);
+      const other = first.get(key);
+      if (other === undefined) {
+        first.set(key, k);
+      } else if (other >= 0) {
+        const paired = partner[other] >= 0;
+        partner[other] = paired ? -1 : k;
+        if (!paired) partner[k] = other;
+        else first.set(key, -1); // a third path on this edge
+      }
+    }
+    for (let k = 0; k < partner.length; k++) {
+      if (partner[k] >= 0 && partner[partner[k]] !== k) partner[k] = -1;
+    }
+    return partner;
+  }
+
+  // Canvas 2D anti-aliases each triangle on its own, so the page shows through the edge two triangles share: like
+  // the SVG it strokes such edges with the fill colour (STROKE_PX, round caps and joins), but only where the
+  // other path is drawn that frame, so the silhouette does not grow (seams.py's rule, by topology alone).
+  // Gouraud falls back to each triangle's mean colour.
+  function canvasRenderer(cv, anim) {
     const ctx = cv.getContext("2d");
     if (!ctx) return null;
+    const { width, height } = anim.h;
+    const partner = edgePartners(anim);
+    const area2 = new Float64Array(anim.h.paths); // twice the area of each path drawn this frame
+    const rim = new Uint8Array(anim.h.paths); // ... 1 when one of its edges is outline this frame
     return {
       name: "canvas2d",
-      draw(pos, col, corners) {
+      draw(pos, col, corners, paths, shownNow) {
         ctx.setTransform(cv.width / width, 0, 0, cv.height / height, 0, 0);
         ctx.clearRect(0, 0, width, height);
         ctx.lineWidth = STROKE_PX;
         ctx.lineJoin = "round";
+        ctx.lineCap = "round";
+        for (let i = 0; i < corners; i += 3) {
+          const ex = pos[2 * i + 2] - pos[2 * i], ey = pos[2 * i + 3] - pos[2 * i + 1];
+          const fx = pos[2 * i + 4] - pos[2 * i], fy = pos[2 * i + 5] - pos[2 * i + 1];
+          const j = paths[i / 3];
+          area2[j] = Math.abs(ex * fy - ey * fx);
+          rim[j] = 0;
+          for (let e = 0; e < 3; e++) {
+            const o = partner[3 * j + e];
+            if (o < 0 || !shownNow[(o - (o % 3)) / 3]) rim[j] = 1;
+          }
+        }
         for (let i = 0; i < corners; i += 3) {
           const a = 4 * i;
           const r = Math.round((col[a] + col[a + 4] + col[a + 8]) / 3);
@@ -539,43 +575,49 @@ void main() { o = v; }`;
           ctx.lineTo(pos[2 * i + 4], pos[2 * i + 5]);
           ctx.closePath();
           ctx.fill();
+          const j = paths[i / 3];
+          let inner = 0; // bit e: edge e (corner e to e + 1) is shared with a path drawn now, neither a rim sliver
+          for (let e = 0; e < 3; e++) {
+            const o = partner[3 * j + e];
+            const q = (o - (o % 3)) / 3;
+            if (o < 0 || !shownNow[q]) continue;
+            const c0 = i + e, c1 = i + (e + 1) % 3;
+            const wide = SLIVER_PX * Math.hypot(pos[2 * c1] - pos[2 * c0], pos[2 * c1 + 1] - pos[2 * c0 + 1]);
+            if ((rim[j] && area2[j] < wide) || (rim[q] && area2[q] < wide)) continue;
+            inner |= 1 << e;
+          }
+          if (!inner) continue;
+          ctx.beginPath();
+          if (inner === 7) {
+            ctx.moveTo(pos[2 * i], pos[2 * i + 1]);
+            ctx.lineTo(pos[2 * i + 2], pos[2 * i + 3]);
+            ctx.lineTo(pos[2 * i + 4], pos[2 * i + 5]);
+            ctx.closePath();
+          } else {
+            let e = 0; // start after a left-out edge, so consecutive stroked edges join
+            while (inner & (1 << e)) e++;
+            let open = false;
+            for (let step = 1; step <= 3; step++) {
+              const s0 = (e + step) % 3;
+              if (!(inner & (1 << s0))) {
+                open = false;
+                continue;
+              }
+              const c0 = i + s0, c1 = i + (s0 + 1) % 3;
+              if (!open) ctx.moveTo(pos[2 * c0], pos[2 * c0 + 1]);
+              ctx.lineTo(pos[2 * c1], pos[2 * c1 + 1]);
+              open = true;
+            }
+          }
           ctx.stroke();
         }
       },
     };
   }
 
-  // WebGL draws no strokes: each triangle grows by the SVG's half stroke width instead (every edge moved out by
-  // STROKE_PX / 2, a corner along its bisector, at most twice that), so silhouettes and thin triangles match the
-  // SVG's (the canvas 2D renderer strokes like the SVG). Degenerate triangles are left as they are.
-  const HALF = STROKE_PX / 2;
-  function grow(pos, k) {
-    const o = 2 * k;
-    const ax = pos[o], ay = pos[o + 1], bx = pos[o + 2], by = pos[o + 3], cx = pos[o + 4], cy = pos[o + 5];
-    // Unit edge directions a->b, b->c, c->a.
-    let ex = bx - ax, ey = by - ay, fx = cx - bx, fy = cy - by, gx = ax - cx, gy = ay - cy;
-    const le = Math.sqrt(ex * ex + ey * ey), lf = Math.sqrt(fx * fx + fy * fy), lg = Math.sqrt(gx * gx + gy * gy);
-    if (!(le > 1e-9 && lf > 1e-9 && lg > 1e-9)) return;
-    ex /= le; ey /= le; fx /= lf; fy /= lf; gx /= lg; gy /= lg;
-    // At corner a the edges leave along e and -g: the outward bisector is -(e - g).
-    if (!shift(pos, o, ex, ey, -gx, -gy) || !shift(pos, o + 2, fx, fy, -ex, -ey) ||
-        !shift(pos, o + 4, gx, gy, -fx, -fy)) {
-      pos[o] = ax; pos[o + 1] = ay; pos[o + 2] = bx; pos[o + 3] = by; pos[o + 4] = cx; pos[o + 5] = cy;
-    }
-  }
-  function shift(pos, i, ux, uy, wx, wy) {
-    const sx = ux + wx, sy = uy + wy;
-    const ls = Math.sqrt(sx * sx + sy * sy);
-    const sinHalf = Math.sqrt(Math.max(0, (1 - (ux * wx + uy * wy)) / 2));
-    if (!(ls > 1e-9 && sinHalf > 1e-9)) return false;
-    const d = Math.min(HALF / sinHalf, 2 * HALF) / ls;
-    pos[i] -= sx * d;
-    pos[i + 1] -= sy * d;
-    return true;
-  }
-
-  // The CPU side of the WebGL 1 and canvas 2D renderers: each frame's corners, then draw(pos, col, corners).
-  function cpuFrames(anim, draw, grows) {
+  // The CPU side of the WebGL 1 and canvas 2D renderers: each frame's corners, then draw(pos, col, corners,
+  // paths (the path of each drawn triangle), shownNow (per path: drawn this frame)).
+  function cpuFrames(anim, draw) {
     const { h, gouraud, pathVertices, xy, rgb, shown } = anim;
     const p = h.paths;
     const nv = h.vertices;
@@ -584,6 +626,7 @@ void main() { o = v; }`;
     const col = new Uint8Array(4 * 3 * p);
     const vxy = new Float32Array(2 * nv);
     const vrgb = new Float32Array(3 * nc);
+    const paths = new Uint32Array(p);
     return (f, w) => {
       const a = f * nv * 2;
       const b = a + nv * 2;
@@ -595,6 +638,7 @@ void main() { o = v; }`;
       let n = 0;
       for (let j = 0; j < p; j++) {
         if (!shown[vis + j]) continue;
+        paths[n / 3] = j;
         for (let c = 0; c < 3; c++) {
           const v = pathVertices[3 * j + c];
           pos[2 * n] = vxy[2 * v];
@@ -606,9 +650,8 @@ void main() { o = v; }`;
           col[4 * n + 3] = 255;
           n++;
         }
-        if (grows) grow(pos, n - 3);
       }
-      draw(pos, col, n);
+      draw(pos, col, n, paths, shown.subarray(vis, vis + p));
     };
   }
 
@@ -631,10 +674,10 @@ void main() { o = v; }`;
         r = webgl2Renderer(canvas, anim, antialias, budgetMs);
       } else if (name === "webgl") {
         const gl1 = webglRenderer(canvas, h.width, h.height, antialias);
-        r = gl1 && { name, frame: cpuFrames(anim, gl1.draw, true), gl: gl1.gl };
+        r = gl1 && { name, frame: cpuFrames(anim, gl1.draw), gl: gl1.gl };
       } else {
-        const c2 = canvasRenderer(canvas, h.width, h.height);
-        r = c2 && { name, frame: cpuFrames(anim, c2.draw, false) };
+        const c2 = canvasRenderer(canvas, anim);
+        r = c2 && { name, frame: cpuFrames(anim, c2.draw) };
       }
       if (r) return r;
       freshCanvas();

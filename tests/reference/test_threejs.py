@@ -4,7 +4,9 @@ Real files from other tools (../shared/data/real), the bundled sample, a generat
 scene, a generated skinned ICT face (neck, head and jaw joints plus morph targets, skinned_ict.py) and a
 generated thin-limbed skinned robot (robot.py), whose limbs are mostly outline: the flat writer's seam stroke
 stays off outline edges (converter/writers/seams.py), else it fattens them (min IoU 0.972 on the robot, 0.968 on
-MorphStressTest's bars when every edge was stroked).
+MorphStressTest's bars when every edge was stroked). The same for the player (--to player) on its default WebGL
+renderer, which draws the triangles as they are (it grew each by 0.25 px before: robot 0.977, MorphStressTest clip
+1 0.976), and on its canvas 2D fallback, which strokes interior edges only; and for exact Gouraud on the robot.
 """
 
 from __future__ import annotations
@@ -63,9 +65,10 @@ def real_cases() -> list:
     return cases or [pytest.param("missing", 0, id="shared-data-missing")]
 
 
-def options_for(clip: int, n_clips: int, size: int | None) -> ConversionOptions:
-    """Our options for one clip: the first clip is today's default; others need --animation (issue 15)."""
-    kw: dict = {} if size is None else {"size": size}
+def options_for(clip: int, n_clips: int, size: int | None, **extra: str) -> ConversionOptions:
+    """Our options for one clip: the first clip is today's default; others need --animation (issue 15).
+    extra: further options (to="player", shading="gouraud")."""
+    kw: dict = dict(extra) if size is None else {**extra, "size": size}
     if n_clips > 1:
         kw["animation"] = str(clip)
     return ConversionOptions.from_mapping(kw)
@@ -79,19 +82,21 @@ def _converted(path: Path, options: ConversionOptions) -> bytes | InputError:
         return exc
 
 
-def ours(path: Path, clip: int = 0, size: int | None = SIZE) -> bytes:
-    """Our SVG of path playing clip."""
+def ours(path: Path, clip: int = 0, size: int | None = SIZE, **extra: str) -> bytes:
+    """Our SVG of path playing clip (or another output: extra options such as to="player")."""
     _, n_clips = gltf_meshes_and_clips(path)
-    result = _converted(path, options_for(clip, n_clips, size))
+    result = _converted(path, options_for(clip, n_clips, size, **extra))
     if isinstance(result, InputError):
         raise result
     return result
 
 
-def check(player, path: Path, svg: bytes, clips, name: str) -> threejs.Comparison:
-    """Compare at 5 frames spread over the animation; saves a side-by-side artifact; asserts IoU everywhere."""
+def check(player, path: Path, svg: bytes, clips, name: str, renderer: str | None = None) -> threejs.Comparison:
+    """Compare at 5 frames spread over the animation; saves a side-by-side artifact; asserts IoU everywhere.
+
+    svg may be a player file, drawn from renderer on."""
     meta = threejs.svg_metadata(svg)
-    result = threejs.compare(player, path, svg, threejs.spread_frames(meta["frames"]), clips)
+    result = threejs.compare(player, path, svg, threejs.spread_frames(meta["frames"]), clips, renderer=renderer)
     ARTIFACTS.mkdir(exist_ok=True)
     Image.fromarray(threejs.side_by_side(result)).save(ARTIFACTS / f"reference_{name}.png")
     scores = {k: round(s, 4) for k, s in zip(result.frames, result.iou)}
@@ -206,6 +211,33 @@ def test_generated_thin_limbed_skinned_robot_matches_threejs(player, thin_robot)
     """Limbs 3-4 px wide at the default size, eight joints turning: the outline is most of what is drawn."""
     svg = ours(thin_robot, size=None)
     result = check(player, thin_robot, svg, "all", "generated_robot")
+    assert result.played == ["walk_and_turn"]
+    assert max(result.colour) <= MAX_COLOUR, f"mean colour difference per frame {result.colour}"
+
+
+RENDERERS = ["webgl2", "canvas2d"]  # WebGL 1 draws WebGL 2's pixels (tests/writers/test_player.py)
+
+
+@pytest.mark.parametrize("renderer", RENDERERS)
+@pytest.mark.parametrize("name,clip", [pytest.param(n, c, id=f"{Path(n).stem}-clip{c}") for n, c in
+                                       [("MorphStressTest.gltf", 0), ("MorphStressTest.gltf", 1),
+                                        ("MorphStressTest.gltf", 2), ("Fox.glb", 0), ("SimpleSkin.gltf", 0)]])
+def test_the_player_matches_threejs(player, shared_data, name, clip, renderer):
+    """The player file (default size) on WebGL, triangles as they are, and on canvas 2D, interior edges stroked.
+    Measured min IoU, WebGL / canvas 2D: MorphStressTest clips 0.994/0.987/0.987 / 0.988/0.981/0.981, Fox 0.995 /
+    0.997, SimpleSkin 0.997 / 0.998 (WebGL growing every triangle by 0.25 px: 0.988/0.976/0.976, Fox 0.992)."""
+    path = shared_data / "real" / name
+    _, n_clips = gltf_meshes_and_clips(path)
+    html = ours(path, clip, size=None, to="player")
+    result = check(player, path, html, [clip] if n_clips else "all", f"player_{path.stem}_{clip}_{renderer}", renderer)
+    assert result.played == result.clips[clip:clip + 1]
+
+
+@pytest.mark.parametrize("renderer", RENDERERS)
+def test_the_player_of_the_thin_robot_matches_threejs(player, thin_robot, renderer):
+    """Measured min IoU 0.989 (WebGL), 0.988 (canvas 2D); 0.977 / 0.970 growing or stroking every triangle."""
+    html = ours(thin_robot, size=None, to="player")
+    result = check(player, thin_robot, html, "all", f"player_robot_{renderer}", renderer)
     assert result.played == ["walk_and_turn"]
     assert max(result.colour) <= MAX_COLOUR, f"mean colour difference per frame {result.colour}"
 

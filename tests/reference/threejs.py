@@ -2,13 +2,15 @@
 
 The page (player.html + player.js) loads three.js from node_modules (`npm ci` in this folder); Playwright serves
 it and the glTF's folder from disk by request interception, so no server or port is involved. Our SVG is
-rasterised in the same Chromium at the same times (tests/svgrender.py), and the two are compared per frame:
-silhouette IoU, and the mean colour difference inside both silhouettes where the colours are comparable.
+rasterised in the same Chromium at the same times (tests/svgrender.py), or our player (--to player) drawn by its
+own script and read off its canvas, and the two are compared per frame: silhouette IoU, and the mean colour
+difference inside both silhouettes where the colours are comparable.
 """
 
 from __future__ import annotations
 
 import base64
+import io
 import json
 import mimetypes
 import os
@@ -19,9 +21,11 @@ from pathlib import Path
 
 import numpy as np
 from lxml import etree
+from PIL import Image
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from converter.formats.gltf import parse_container
+from converter.writers import player as player_writer
 from tests.svgrender import chromium_frames, iou
 
 HERE = Path(__file__).resolve().parent
@@ -48,7 +52,9 @@ def three_version() -> str:
 
 
 def svg_metadata(svg: bytes) -> dict:
-    """The <metadata id="facesvg"> JSON of one of our SVGs."""
+    """The <metadata id="facesvg"> JSON of one of our SVGs, or of our player file (its metadata block)."""
+    if player_writer.is_player(svg):
+        return player_writer._blocks(svg)[0]
     root = etree.fromstring(svg, etree.XMLParser(huge_tree=True))
     node = root.find(f".//{SVG_NS}metadata[@id='facesvg']")
     if node is None:
@@ -129,6 +135,31 @@ def svg_frames(browser, svg: bytes, frames: Sequence[int]) -> np.ndarray:
     return chromium_frames(browser, svg, [k / meta["fps"] for k in frames], width, height)
 
 
+def player_frames(browser, html: bytes, frames: Sequence[int], renderer: str | None = None) -> np.ndarray:
+    """RGBA uint8 (N, H, W, 4) of our player file's canvas at each frame (seeked to k / fps), multisampled
+    throughout (as tests/writers/test_player.py opens it: pixels do not depend on the machine's speed), starting
+    from renderer ("webgl2", "webgl" or "canvas2d") when given; the page behind the canvas left transparent."""
+    meta = svg_metadata(html)
+    width, height = meta["viewport"]
+    ctx = browser.new_context(viewport={"width": width + 64, "height": height + 128})
+    ctx.add_init_script(f"window.facesvgPlayerOptions = {json.dumps({'renderer': renderer, 'antialias': True})}")
+    page = ctx.new_page()
+    try:
+        page.set_content(html.decode())
+        page.wait_for_function("() => window.facesvgPlayer && facesvgPlayer.state !== 'loading'", timeout=60_000)
+        state, drawn = page.evaluate("() => [facesvgPlayer.state, facesvgPlayer.renderer]")
+        if state != "ready" or (renderer and drawn != renderer):
+            raise RuntimeError(f"the player did not start with {renderer or 'its first renderer'}: {state}, {drawn}")
+        out = []
+        for k in frames:
+            page.evaluate("(t) => facesvgPlayer.seek(t)", k / meta["fps"])
+            png = page.locator("#facesvg-canvas").screenshot(omit_background=True)
+            out.append(np.asarray(Image.open(io.BytesIO(png)).convert("RGBA")))
+    finally:
+        ctx.close()
+    return np.stack(out)
+
+
 def colours_comparable(gltf: Path) -> bool:
     """True when every drawn primitive's colour is vertex colours or a baseColorFactor, with no texture.
 
@@ -166,14 +197,18 @@ class Comparison:
 
 
 def compare(browser, gltf: Path, svg: bytes, frames: Sequence[int], clips: Clips = "all",
-            linear: bool = False, camera: dict | None = None) -> Comparison:
-    """Our SVG against three.js playing gltf (clips) at our frames; colours only where comparable.
+            linear: bool = False, camera: dict | None = None, renderer: str | None = None) -> Comparison:
+    """Our SVG (or player file, drawn from renderer on) against three.js playing gltf (clips) at our frames;
+    colours only where comparable.
 
     Colours compare as displayed (three.js's sRGB output transform, the default): we read glTF's linear colours,
     light them in linear light and encode them once, as three.js does. linear=True compares three.js's shaded
     colours before that transform instead (they then differ from ours by the sRGB curve)."""
     meta = svg_metadata(svg)
-    ours = svg_frames(browser, svg, frames)
+    if player_writer.is_player(svg):
+        ours = player_frames(browser, svg, frames, renderer)
+    else:
+        ours = svg_frames(browser, svg, frames)
     ref, info = threejs_frames(browser, gltf, meta, frames, clips, linear, camera)
     with_colour = colours_comparable(gltf)
     ious, colours = [], []

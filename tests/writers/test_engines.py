@@ -31,7 +31,7 @@ COLOUR_MAX = 1.5
 # is 0.1-0.5 from Chromium's at the same time. So MOVES, and the nearest-time check below, have wide margins.
 MOVES = 0.5
 # The player's face (non-white pixels) against the SVG's silhouette, measured: 0.994 in Firefox (canvas 2D: headless
-# Firefox has no WebGL), 0.983-0.987 in WebKit (WebGL, whose triangles grow by the SVG's half stroke).
+# Firefox has no WebGL), 0.983-0.987 in WebKit (WebGL; measured when its triangles still grew by the SVG's half stroke).
 PLAYER_IOU_MIN = 0.97
 
 @pytest.fixture(scope="module")
