@@ -16,6 +16,7 @@ from converter.encode import parallel
 from converter.errors import FacesvgError, InputError
 from converter.formats import captures
 from converter.formats.weights import read_weights
+from converter.live import ports as live_ports
 from converter.options import ConversionOptions, Eta, OptionField, option_fields
 from converter.outputs import choices, output_kind
 from converter.puppet.take import from_track as take_from_track
@@ -186,6 +187,15 @@ def cmd_puppet_take(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_live(args: argparse.Namespace) -> int:
+    """facesvg live: bridge Live Link Face, iFacialMocap and VMC streams to puppet players until Ctrl-C."""
+    ports = live_ports.Ports(**{key: live_ports.port_number(getattr(args, f"{key}_port"), f"--{key}-port")
+                                for key in ("llf", "ifm", "vmc", "ws")})
+    # imported when it runs: websockets would add ~70 ms to every facesvg command (as webapp.cli defers Flask)
+    importlib.import_module("converter.live.server").run(args.host, ports, say=lambda line: print(line, flush=True))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand."""
     parser = argparse.ArgumentParser(prog="facesvg", description="Turn 3D facial animation into lightweight 2D.")
@@ -226,6 +236,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("capture", help="the weight capture (any layout --weights reads)")
     p.add_argument("-o", "--output", help="output file (default: replace the puppet file)")
     p.set_defaults(func=cmd_puppet_take)
+
+    p = sub.add_parser("live", help="bridge a face tracker's live stream (Live Link Face, iFacialMocap, VMC) to "
+                                    "puppet players (--to puppet) over a WebSocket")
+    defaults = live_ports.Ports()
+    for key, label in (("llf", "Live Link Face's UDP stream"), ("ifm", "iFacialMocap's UDP frames"),
+                       ("vmc", "VMC protocol (OSC over UDP)"), ("ws", "the players' WebSocket (TCP)")):
+        p.add_argument(f"--{key}-port", default=str(getattr(defaults, key)), metavar="PORT",
+                       help=f"port of {label} (default {getattr(defaults, key)}; 0: any free port)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to listen on (default 127.0.0.1, this machine only; 0.0.0.0 takes a phone's stream "
+                        "from the network)")
+    p.set_defaults(func=cmd_live)
 
     # Other subcommands register here (verify, clone, fdp, fap-loa, serve).
     for register in _extra_commands():
