@@ -17,11 +17,14 @@ that are ever outline (one: open there; two or three: unstroked), and wherever t
 neighbours at some frame would both leave their shared edge out, the one whose edge is less often outline
 strokes it after all. So every shared edge is stroked by one side at every frame where it is interior (no seam
 opens), and what still grows the outline is an edge that is outline at some frames and, on the side that strokes
-it, interior at others (MorphStressTest: 0.986 at worst; the robot, whose limbs turn: 0.983).
+it, interior at others (MorphStressTest: 0.986 at worst; the robot, whose limbs turn: 0.983). ``stroke_off`` names
+the frames where a path's stroke does that, for a writer to turn it off there (exact Gouraud, whose 1 px stroke
+held the robot to 0.977: 0.985 with it), wherever the neighbours' strokes keep every interior edge covered.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from typing import NamedTuple
 
 import numpy as np
@@ -95,9 +98,20 @@ def edge_frames(pe: np.ndarray, active: np.ndarray, corners: np.ndarray | None =
     corner on the silhouette (a sliver seen edge-on), nor where it starts at a silhouette vertex and lies within
     NEAR_PX of an outline edge there all along (a thin strip's diagonal: its stroke would run outside the
     silhouette for most of its length, and a seam left open there lies in the outline's own anti-aliasing)."""
-    t, p = active.shape
+    p = active.shape[1]
     outline = np.zeros((p, 3), np.int64)
     interior = np.zeros((p, 3), np.int64)
+    for _, out, inside in edge_states(pe, active, corners, xy, tri_ids, reach):
+        outline += out.sum(axis=0)
+        interior += inside.sum(axis=0)
+    return outline, interior
+
+
+def edge_states(pe: np.ndarray, active: np.ndarray, corners: np.ndarray | None = None, xy: np.ndarray | None = None,
+                tri_ids: np.ndarray | None = None, reach: float = 0.0) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
+    """Per block of frames (first frame a, outline (b, P, 3), interior (b, P, 3)): each edge's state at each
+    frame, as edge_frames counts them (arguments as it takes them); a block at a time so memory stays small."""
+    t, p = active.shape
     bound = pe == -1
     shared = pe >= 0
     other = np.where(shared, pe, 0).ravel()
@@ -113,9 +127,7 @@ def edge_frames(pe: np.ndarray, active: np.ndarray, corners: np.ndarray | None =
             pts = np.take(np.asarray(xy[a:a + b], np.float32), tri_ids, axis=1).astype(np.float64)  # (b, P, 3, 2)
             ok = _stays_inside(mine & ~nb & (bound | shared), corners, pts, reach)
             inside &= ok & np.take(ok.reshape(b, 3 * p), other, axis=1).reshape(b, p, 3)
-        outline += (mine & ~inside & (bound | shared)).sum(axis=0)
-        interior += inside.sum(axis=0)
-    return outline, interior
+        yield a, mine & ~inside & (bound | shared), inside
 
 
 def _stays_inside(out: np.ndarray, corners: np.ndarray, pts: np.ndarray, reach: float) -> np.ndarray:
@@ -196,3 +208,30 @@ def layout(skip: np.ndarray) -> Seams:
     n = skip.sum(axis=1)
     start = np.where(n == 1, (np.argmax(skip, axis=1) + 1) % 3, 0)
     return Seams(skip, start, n != 1, n < 3)
+
+
+
+def stroke_off(corners: np.ndarray, active: np.ndarray, skip: np.ndarray, xy: np.ndarray | None = None,
+               tri_ids: np.ndarray | None = None, reach: float = 0.0) -> np.ndarray:
+    """Bool (T, P): frames where a drawn path's stroke is better off, one of the edges it strokes (skip (P, 3)
+    false, not every edge skipped) counting as outline then, and every other edge it strokes that is interior
+    then stroked by the other side too (arguments as skips takes them), so no seam opens.
+
+    skips fixes one layout for the whole animation, so an edge that is outline at some frames and interior at
+    others is stroked at both; a writer that drops the path's stroke at these frames keeps the silhouette."""
+    t, p = active.shape
+    out = np.zeros((t, p), bool)
+    pe = partners(corners)
+    stroked = ~skip & ~skip.all(axis=1, keepdims=True)
+    back = np.where(pe >= 0, pe, 0).ravel()
+    for a, outline, inside in edge_states(pe, active, corners, xy, tri_ids, reach):
+        b = len(outline)
+        off = (outline & stroked).any(axis=2)
+        while off.any():  # each round only turns strokes back on, so it ends
+            theirs = np.take((stroked[None] & ~off[..., None]).reshape(b, 3 * p), back, axis=1).reshape(b, p, 3)
+            needed = off & (inside & stroked & ~theirs).any(axis=2)
+            if not needed.any():
+                break
+            off &= ~needed
+        out[a:a + b] = off
+    return out

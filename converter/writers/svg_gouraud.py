@@ -36,7 +36,8 @@ GRADIENT_FRAMES = 32  # frames whose gradients are fitted together
 COLOR_EPS_LEVELS = 1.5  # 8-bit levels a keyframed stop colour may deviate before rounding (+0.5 from rounding)
 UNDERLAY = True  # stills of the exact method get a seamless per-part underlay
 UNDERLAY_INSET = 0.5  # px the underlay stays inside the silhouette
-SEAM_STROKE = 1.0  # px of same-paint stroke over interior edges: covers anti-aliasing cracks (exact method)
+SEAM_STROKE = 1.0  # px of same-paint stroke over interior edges: covers anti-aliasing cracks (exact method);
+# stroke-width 0 at the frames where it would reach past the outline (seams.stroke_off)
 # Opacity correction of the chapter's sum of three 8-bit layers: up to 1.5/255 of alpha lost to rounding.
 CHAPTER_ALPHA_GAIN = 1 + 2 / 255
 CHAPTER_FILTER = (
@@ -292,7 +293,7 @@ def _element(tag: str, attrs: str, body: str) -> str:
     return f"<{tag} {attrs}>{body}</{tag}>" if body else f"<{tag} {attrs}/>"
 
 
-def _exact_triangle(e: _Emit, f: int, vis: tuple[str, str], stroked: bool) -> str:
+def _exact_triangle(e: _Emit, f: int, vis: tuple[str, str], stroked: bool | tuple[str, str]) -> str:
     """A userSpaceOnUse linearGradient along the colour gradient and the triangle filled and stroked with it."""
     axis, axis_anim = e.attrs("x1", "y1", "x2", "y2", target=f"g{f}")
     c1, c1_anim = e.attrs("c1")
@@ -300,8 +301,9 @@ def _exact_triangle(e: _Emit, f: int, vis: tuple[str, str], stroked: bool) -> st
     d, d_anim = e.attrs("d")
     stops = _element("stop", c1, c1_anim) + _element("stop", 'offset="1" ' + c2, c2_anim)
     grad = f'<linearGradient id="g{f}" gradientUnits="userSpaceOnUse" {axis}>{stops}</linearGradient>{axis_anim}'
-    stroke = f' stroke="url(#g{f})"' if stroked else ""
-    path = _element("path", f'{d} fill="url(#g{f})"{stroke}{vis[0]}', d_anim + vis[1])
+    width = stroked if isinstance(stroked, tuple) else ("", "")
+    stroke = f' stroke="url(#g{f})"{width[0]}' if stroked else ""
+    path = _element("path", f'{d} fill="url(#g{f})"{stroke}{vis[0]}', d_anim + vis[1] + width[1])
     return grad + path
 
 
@@ -342,6 +344,26 @@ def _visibility(seen: np.ndarray, dur: str) -> tuple[str, str]:
     )
 
 
+def _stroke_width(off: np.ndarray, seen: np.ndarray, dur: str) -> tuple[str, str]:
+    """(initial stroke-width attribute, discrete <animate> of its changes or '') for one triangle's (T,) frames
+    whose stroke is off (seams.stroke_off); frames where it is hidden keep the last shown frame's width."""
+    t = len(off)
+    shown = np.flatnonzero(seen)
+    if not off[shown].any():
+        return "", ""
+    last = np.maximum.accumulate(np.where(seen, np.arange(t), -1))
+    state = off[np.where(last >= 0, last, shown[0])]
+    initial = ' stroke-width="0"' if state[0] else ""
+    changes = np.concatenate([[0], np.flatnonzero(state[1:] != state[:-1]) + 1])
+    if len(changes) == 1:
+        return initial, ""
+    values = ";".join("0" if state[k] else svg_number(SEAM_STROKE, 2) for k in changes.tolist())
+    return initial, (
+        f'<animate attributeName="stroke-width" calcMode="discrete" dur="{dur}" repeatCount="indefinite" '
+        f'keyTimes="{_key_times(changes, t, floor=True)}" values="{values}"/>'
+    )
+
+
 def write(sheet: Sheet, options: ConversionOptions, report: Report, progress: Progress = no_progress) -> bytes:
     """Gouraud-shaded SVG: a still of options.frame, else the animation with gradients moving with the mesh;
     progress(stage, fraction of the writing done) between its steps and every GOURAUD_PROGRESS triangles."""
@@ -361,11 +383,14 @@ def write(sheet: Sheet, options: ConversionOptions, report: Report, progress: Pr
         order = sheet.order
         frames = np.arange(t_all)
     silhouette = None
+    stroke_off: np.ndarray | None = None
     if method == "exact":
         tris = sheet.faces[order]
         drawn = np.take(sheet.visible[frames], order, axis=1)
-        skip, _ = seams.skips(welded_ids(sheet.xy[frames], sheet.depth[frames])[tris], drawn, sheet.xy[frames], tris,
-                              SEAM_STROKE / 2)
+        corners = welded_ids(sheet.xy[frames], sheet.depth[frames])[tris]
+        skip, _ = seams.skips(corners, drawn, sheet.xy[frames], tris, SEAM_STROKE / 2)
+        if not still:  # the layout is one for all frames: a stroke that would spill at a frame is off there
+            stroke_off = seams.stroke_off(corners, drawn, skip, sheet.xy[frames], tris, SEAM_STROKE / 2)
         if still:  # the underlay keeps off the outer silhouette but covers folds (outline edges with surface beyond)
             silhouette = silhouette_edges(sheet.xy[frames[0]][tris].astype(np.float64), skip, w, h)
         tri, closed, stroked = seam_layout(tris, skip)
@@ -425,7 +450,10 @@ def write(sheet: Sheet, options: ConversionOptions, report: Report, progress: Pr
         if not emit.select(j, bool(closed[j])):
             continue
         vis = ("", "") if still else _visibility(sheet.visible[:, f], dur)
-        out.append(draw(emit, f, vis, bool(stroked[j])))
+        stroke: bool | tuple[str, str] = bool(stroked[j])
+        if stroke and stroke_off is not None:
+            stroke = _stroke_width(stroke_off[:, j], sheet.visible[:, f], dur)
+        out.append(draw(emit, f, vis, stroke))
     out.append("</g></svg>\n")
     report.counts["gouraud_triangles"] = len(order)
     return "\n".join(out).encode("utf-8")

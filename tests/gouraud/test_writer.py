@@ -14,7 +14,7 @@ from converter.errors import InputError
 from converter.extract import extract, fit_camera
 from converter.options import ConversionOptions, Report
 from converter.outputs import writer_for
-from converter.writers import svg_gouraud
+from converter.writers import seams, svg_gouraud
 from converter.writers.gradients import exact_gradients
 from tests.gouraud.meshes import ellipsoid
 
@@ -168,6 +168,34 @@ def test_animated_visibility_follows_the_sheet(sheet):
         for k in range(sheet.n_frames):
             shown = values[max(i for i, tk in enumerate(times) if tk <= k / sheet.n_frames)]
             assert (shown == "inline") == vis[k]
+
+
+def test_seam_stroke_is_off_exactly_where_it_would_reach_past_the_outline(sheet):
+    """One seam layout for all frames; a stroke is off (stroke-width 0) at the frames seams.stroke_off names."""
+    root, _, _ = write(sheet, shading="gouraud", raw=True)
+    tris, drawn = sheet.faces[sheet.order], sheet.visible[:, sheet.order]
+    corners = svg_gouraud.welded_ids(sheet.xy, sheet.depth)[tris]
+    reach = svg_gouraud.SEAM_STROKE / 2
+    skip, _ = seams.skips(corners, drawn, sheet.xy, tris, reach)
+    off = seams.stroke_off(corners, drawn, skip, sheet.xy, tris, reach)
+    column = {f: j for j, f in enumerate(sheet.order.tolist())}
+    seen_off = 0
+    for p in root.iter(f"{SVG}path"):
+        if p.get("stroke") is None:
+            continue
+        j = column[int(re.search(r"#g(\d+)", p.get("fill")).group(1))]
+        anim = [a for a in p.findall(f"{SVG}animate") if a.get("attributeName") == "stroke-width"]
+        if drawn[0, j]:  # static renderers draw frame 0 from the attributes
+            assert (p.get("stroke-width") == "0") == off[0, j]
+        for k in np.flatnonzero(drawn[:, j]).tolist():
+            width = p.get("stroke-width") or str(svg_gouraud.SEAM_STROKE)
+            if anim:
+                assert anim[0].get("calcMode") == "discrete"
+                times = [float(x) for x in anim[0].get("keyTimes").split(";")]
+                width = anim[0].get("values").split(";")[max(i for i, t in enumerate(times) if t <= k / sheet.n_frames)]
+            assert (float(width) == 0) == off[k, j], (j, k)
+            seen_off += int(off[k, j])
+    assert seen_off  # this turning ellipsoid has edges that are outline at some frames and interior at others
 
 
 def test_chapter_still_has_three_ramps_a_filter_and_a_background_per_triangle(sheet):

@@ -87,6 +87,23 @@ def test_two_sides_that_both_want_an_edge_out_agree_on_one_stroking_it():
     assert skip[0, e0] and not skip[1, e1]  # drawn together at frames 3-5: one of them strokes it, the other not
 
 
+def test_a_stroke_is_off_at_a_frame_where_an_edge_it_strokes_is_outline_unless_a_seam_would_open():
+    tris, _ = strip(2)
+    active = np.ones((6, 4), bool)
+    active[0:2, 1] = False
+    active[2:3, 0] = False  # the edge 0|1 is outline for triangle 1 at frame 2 only
+    skip, _ = seams.skips(tris, active)
+    pe = seams.partners(tris)
+    e1 = int(np.flatnonzero((pe[1] // 3) == 0)[0])
+    assert not skip[1, e1]  # one layout for every frame: triangle 1 strokes it, outline at frame 2 too
+    off = seams.stroke_off(tris, active, skip)
+    assert off[2, 1] and off.sum() == 1  # so its stroke is off there, and only there
+    # if triangle 2 left their shared edge to triangle 1, dropping 1's stroke would open that seam: kept on
+    e2 = int(np.flatnonzero((pe[2] // 3) == 1)[0])
+    skip[2, e2] = True
+    assert not seams.stroke_off(tris, active, skip).any()
+
+
 def test_a_sliver_at_the_silhouette_carries_no_stroke_out_of_it():
     # Two squares, the second squeezed to 0.1 px wide (a side face seen edge-on): its edges are all outline-like.
     tris, xy = strip(2)
