@@ -171,6 +171,9 @@ function setupInspect() {
   const faceInfo = document.getElementById("face-info");
   const takeInfo = document.getElementById("take-info");
   let asked = 0;
+  // A file over the upload limit is never sent (the server would refuse it with a 413): the form says so instead.
+  const uploadLimit = parseInt(form.dataset.maxBytes, 10) || Infinity;
+  const sendable = (file) => file && file.size <= Math.min(INSPECT_MAX_BYTES, uploadLimit);
   async function inspect(file, role) {
     const body = new FormData();
     body.append("file", file, file.name);
@@ -224,7 +227,7 @@ function setupInspect() {
     const ticket = ++asked;
     fill("animations", []); fill("frame_on", []);
     say(faceInfo, "");
-    if (!file || file.size > INSPECT_MAX_BYTES) return;
+    if (!sendable(file)) return;
     say(faceInfo, "Reading the face…");
     try {
       const info = await inspect(file);
@@ -252,7 +255,7 @@ function setupInspect() {
   if (take) take.addEventListener("change", async () => {
     const file = take.files[0];
     say(takeInfo, "");
-    if (!file || file.size > INSPECT_MAX_BYTES) return;
+    if (!sendable(file)) return;
     try {
       const info = await inspect(file, "take");
       if (info.kind !== "take") say(takeInfo, `“${file.name}” is a face, not a take: put it in “A face”.`, true);

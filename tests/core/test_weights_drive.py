@@ -141,7 +141,9 @@ def test_llf_driven_ict_plays_in_chromium(driven, browser, artifacts):
     from PIL import Image
 
     Image.fromarray(np.concatenate([a, b], axis=1)).save(artifacts / "weights_llf_ict.png")
-    assert (a[..., 3] > 127).mean() > 0.1  # the face is drawn
+    # the face is drawn: every 4th triangle of its front, isolated, so all outline and drawn without the seam
+    # stroke (7 % of the frame at 192 px; 10-11 % when every edge was stroked)
+    assert (a[..., 3] > 127).mean() > 0.05
     assert np.abs(a.astype(int) - b.astype(int)).sum() > 0  # and it moves: the jaw opens
 
 

@@ -150,8 +150,15 @@ def test_urllib_gets_the_413_from_facesvg_serve(tmp_path):
 def test_browser_the_form_names_the_file_over_the_limit(browser, tmp_path, artifacts):
     server = LiveServer(make_app(tmp_path, "embedded", MAX_CONTENT_LENGTH=64 * KB, WTF_CSRF_ENABLED=True))
     page = browser.new_page(viewport={"width": 1024, "height": 900})
-    posts = []
-    page.on("request", lambda r: posts.append(r.url) if r.method == "POST" else None)
+    posts, inspected = [], []  # the form's submissions; what the page sent to /api/v1/inspect for suggestions
+
+    def sent(request) -> None:
+        if request.method == "POST":
+            (inspected if request.url.endswith("/inspect") else posts).append(len(request.post_data_buffer or b""))
+            if not request.url.endswith("/inspect"):
+                posts[-1] = request.url
+
+    page.on("request", sent)
     glb = "model/gltf-binary"
     try:
         page.goto(server.url + "/")
@@ -189,6 +196,7 @@ def test_browser_the_form_names_the_file_over_the_limit(browser, tmp_path, artif
         page.click("#convert")  # within the limit: sent (the server then says what is wrong with the file)
         page.wait_for_load_state()
         assert posts and posts[0].endswith("/jobs")
+        assert all(size <= 64 * KB for size in inspected), inspected  # a file over the limit is never sent
     finally:
         page.close()
         server.close()
