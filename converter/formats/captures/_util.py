@@ -81,6 +81,15 @@ def frame_count(n: int, name: str) -> None:
         raise InputError(f"{name} has {n} frames, more than {MAX_FRAMES}; trim the capture.")
 
 
+def is_float(s: object) -> bool:
+    """Whether float(s) reads it (a cell, a key): the readers' test before they name a bad value."""
+    try:
+        float(s)  # type: ignore[arg-type]
+        return True
+    except (TypeError, ValueError):
+        return False
+
+
 def finite(values: np.ndarray, name: str, what: str) -> np.ndarray:
     """The array when every value is finite; InputError naming the first frame that is not."""
     bad = ~np.isfinite(values)

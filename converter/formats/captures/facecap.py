@@ -67,7 +67,7 @@ def parse(data: bytes, name: str) -> WeightTrack:
     try:
         table = np.array(frames, np.float64)
     except ValueError:
-        k = next(k for k, cells in enumerate(frames) if not all(_is_float(c) for c in cells))
+        k = next(k for k, cells in enumerate(frames) if not all(_util.is_float(c) for c in cells))
         raise InputError(f"{name} line {numbers[k]} holds a value that is not a number.") from None
     bad = ~np.isfinite(table)
     if bad.any():
@@ -90,14 +90,6 @@ def parse(data: bytes, name: str) -> WeightTrack:
 
     return WeightTrack(names, times, table[:, 1 + POSE_COLUMNS:].astype(np.float32), float(fps), "", head,
                        eye(7), eye(9), NAME)
-
-
-def _is_float(s: str) -> bool:
-    try:
-        float(s)
-        return True
-    except ValueError:
-        return False
 
 
 LAYOUT = CaptureLayout(

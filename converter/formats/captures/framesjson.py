@@ -61,7 +61,7 @@ def parse(data: bytes, name: str) -> WeightTrack:
 
 def _time_keyed(doc: dict) -> list[dict] | None:
     """{"0.016": {name: w}, ...} as a frame list, or None when the keys are not all numbers."""
-    if not doc or not all(_is_float(k) and isinstance(v, dict) for k, v in doc.items()):
+    if not doc or not all(_util.is_float(k) and isinstance(v, dict) for k, v in doc.items()):
         return None
     return [{"time": float(k), "blendshapes": v} for k, v in sorted(doc.items(), key=lambda kv: float(kv[0]))]
 
@@ -116,13 +116,6 @@ def frame_list(frames: list[dict], fps, name: str) -> WeightTrack:
         t = np.arange(len(rows)) / rate
     return WeightTrack(names, t, values.astype(np.float32), float(rate), source=NAME)
 
-
-def _is_float(s) -> bool:
-    try:
-        float(s)
-        return True
-    except (TypeError, ValueError):
-        return False
 
 
 LAYOUT = CaptureLayout(

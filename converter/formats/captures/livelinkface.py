@@ -80,7 +80,7 @@ def parse(data: bytes, name: str) -> WeightTrack:
         try:
             table[:, i] = [float(r[i]) for r in body]
         except ValueError:
-            bad = next(k for k, r in enumerate(body) if not _is_float(r[i]))
+            bad = next(k for k, r in enumerate(body) if not _util.is_float(r[i]))
             raise InputError(
                 f"{name} row {bad + 2}, column {header[i]}: {body[bad][i][:30]!r} is not a number."
             ) from None
@@ -123,13 +123,6 @@ def timecode_times(cells: list[str], name: str) -> tuple[np.ndarray, int]:
                          f"{cells[k].strip()}); the take is edited or spans midnight.")
     return t - t[0], base
 
-
-def _is_float(s) -> bool:
-    try:
-        float(s)
-        return True
-    except (TypeError, ValueError):
-        return False
 
 
 LAYOUT = CaptureLayout(
