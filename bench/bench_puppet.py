@@ -25,6 +25,7 @@ from converter.puppet import from_track, puppet_of
 from converter.writers import puppet as writer
 from tests.conftest import chromium_path, launched_chromium
 from tests.puppet.faces import face_zip
+from tests.reference import threejs
 
 TITLE = "Puppet (--to puppet): build time, package size, bytes per take frame"
 SHARED = ROOT.parent / "shared" / "data"
@@ -34,6 +35,9 @@ LLF = SHARED / "real" / "livelinkface_MySlate_3.csv"
 LONG_FRAMES = 4000
 THROTTLE = 4  # DevTools CPU throttling, as bench_playback's mid-range phone
 DRAWS = 60
+SWEEP = (0, 10, 20, 30, 40, 50)  # degrees of head yaw, then pitch, against our prerender
+SWEEP_SIZE = 256
+IN_VIEW = 0.5  # below this share of its rest silhouette the prerendered head has left the frame
 # One frame of the take after another, each evaluated and drawn at once: the script's CPU time a frame.
 DRAW_LOOP = """async (n) => {
   await new Promise((r) => requestAnimationFrame(() => r()));
@@ -95,6 +99,29 @@ def measure(label: str, path: Path, takes: list[Path], played: list[bytes]) -> l
     return rows
 
 
+def angle_limit(faces: list[tuple[str, Path]]) -> str:
+    """Markdown: per face, head yaw and pitch 0-50 degrees, the (Gouraud) puppet in Chromium against our 3D
+    prerender, silhouette IoU and luminance SSIM (tests/puppet/test_threejs.py measures the same), or "" without
+    Chromium."""
+    exe = chromium_path()
+    if not exe:
+        return ""
+    rows = []
+    with launched_chromium(exe) as browser:
+        for label, path in faces:
+            face = load_morph_face(path)
+            puppet = puppet_of(face, ConversionOptions(size=SWEEP_SIZE, shading="gouraud"))
+            page = writer.write(puppet, ConversionOptions(), Report())
+            for axis, deg, iou, ssim, seen in threejs.angle_sweep(browser, face, page, puppet.camera, SWEEP):
+                shown = (f"{iou:.4f} | {ssim:.4f}" if seen >= IN_VIEW else "out of view | out of view")
+                rows.append(f"| {label} | {axis} | {deg:.0f} | {shown} | {seen:.2f} |")
+    return (f"\n\nThe measured angle limit: head yaw, then pitch, the Gouraud puppet ({SWEEP_SIZE} px) in headless Chromium "
+            "against our 3D prerender (converter/render.py), no morph weights; silhouette IoU and SSIM of the "
+            "luminance over the union of the silhouettes; in view: the prerender's silhouette over its rest area (the "
+            "head turns about the rest bounding box centre, a full-body avatar's chest):\n\n"
+            "| face | axis | degrees | IoU | SSIM | in view |\n|---|---|---|---|---|---|\n" + "\n".join(rows))
+
+
 def run() -> str:
     """The section's markdown."""
     head = ("| face | vertices / triangles | puppet vertices / triangles | parameters | load CPU s | build CPU s | "
@@ -117,6 +144,7 @@ def run() -> str:
             if path.exists():
                 rows += measure(label, path, takes or [LLF], played)
                 labels.append(label)
+        sweep = angle_limit([(label, path) for label, path in faces if path.exists()])
     note = "" if ICT.exists() else "\n\n../shared/data is missing: only the generated face was measured."
     timing = draw_ms(played) if takes else []
     if timing:
@@ -124,4 +152,4 @@ def run() -> str:
                  f"evaluate and draw a frame (mean of {DRAWS}), unthrottled and at {THROTTLE}x CPU throttling:\n\n"
                  "| face | renderer | ms a frame | ms at 4x |\n|---|---|---|---|\n" +
                  "\n".join(f"| {label} | {r} | {a:.1f} | {b:.1f} |" for label, (a, b, r) in zip(labels, timing)))
-    return head + "\n" + "\n".join(rows) + note
+    return head + "\n" + "\n".join(rows) + note + sweep

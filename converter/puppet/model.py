@@ -45,6 +45,8 @@ VISIBILITY_GRID = tuple(float(a) for a in range(-40, 41, 10))  # degrees of head
 # front-facing triangles the puppet keeps
 XY_STEP = 1.0 / 16  # px: the quantisation step of a displacement (coarser only where a table's range needs it)
 Z_LEVELS = 1 << 12  # depth steps over the neutral face's depth range: the step of a depth change
+NEUTRAL_XY_STEP = 1.0 / 16  # px: the neutral face's positions are snapped to this grid (the package stores integers)
+NEUTRAL_Z_STEP = 1.0 / 65536  # NDC: ... and its depths to this one
 MOVE_PX = 0.05  # px: a vertex that moves less at every keyform of a target is left out of its table
 INT16 = 32767
 MOVE_EPS = 0.0  # a vertex is a candidate for a morph's table where any coordinate of its 3D delta differs from this
@@ -294,7 +296,9 @@ def build(face: MorphFace, camera: Camera, gouraud: bool = False, progress: Prog
             "morph_intervals": int(sum(len(p.axes[0]) - 1 for p in morphs)),
             "eyes": int(bool(eyes))}
     progress("puppet", 1.0)
-    return Puppet(face.name, camera, xy0[used].astype(np.float32), z0[used].astype(np.float32),
+    snapped_xy = (np.rint(xy0[used] / NEUTRAL_XY_STEP) * NEUTRAL_XY_STEP).astype(np.float32)
+    snapped_z = (np.rint(z0[used] / NEUTRAL_Z_STEP) * NEUTRAL_Z_STEP).astype(np.float32)
+    return Puppet(face.name, camera, snapped_xy, snapped_z,
                   used.astype(np.int32), tris, int(len(faces)), colors, bool(gouraud), pivot3.astype(np.float64),
                   morphs, eyes, np.array(centres, np.float64).reshape(-1, 3), aliases,
                   tuple(normalise(n) for n in face.names), None, info)

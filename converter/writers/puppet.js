@@ -39,9 +39,18 @@
     return out;
   }
 
-  // One array of a block from its index entry [offset, dtype, length]; "p" dtypes are byte planes.
+  // One array of a block from its index entry [offset, dtype, length]; "p" dtypes are byte planes, "zp" zigzag
+  // signed integers (0, -1, 1, -2, ...).
   function view(buf, entry) {
     const [off, kind, n] = entry;
+    if (kind === "zp") {
+      const lo = buf.subarray(off, off + n), hi = buf.subarray(off + n, off + 2 * n), out = new Int32Array(n);
+      for (let i = 0; i < n; i++) {
+        const u = lo[i] | (hi[i] << 8);
+        out[i] = (u >>> 1) ^ -(u & 1);
+      }
+      return out;
+    }
     if (kind.endsWith("p")) {
       const lo = buf.subarray(off, off + n), hi = buf.subarray(off + n, off + 2 * n);
       const out = kind.startsWith("i") ? new Int16Array(n) : new Uint16Array(n);
@@ -92,13 +101,34 @@
       const a = meta.arrays;
       this.V = meta.vertices;
       this.F = meta.triangles;
-      this.xy0 = view(buf, a.xy);
-      this.z0 = view(buf, a.z);
-      this.tris = view(buf, a.tris);
-      for (let i = 1; i < this.tris.length; i++) this.tris[i] += this.tris[i - 1];  // stored as gaps
-      this.colors = view(buf, a.colors);
+      const V = this.V, qxy = view(buf, a.xy), qz = view(buf, a.z), qt = view(buf, a.tris);
+      this.xy0 = new Float32Array(2 * V);
+      this.z0 = new Float32Array(V);
+      let x = 0, y = 0, d = 0;  // stored as differences from the previous vertex: x column, then y
+      for (let i = 0; i < V; i++) {
+        x += qxy[i];
+        y += qxy[V + i];
+        d += qz[i];
+        this.xy0[2 * i] = x * meta.xyUnit;
+        this.xy0[2 * i + 1] = y * meta.xyUnit;
+        this.z0[i] = d * meta.zUnit;
+      }
+      this.tris = new Int32Array(3 * this.F);
+      let first = 0;  // the gap from the previous triangle's first corner, then the others' offsets from it
+      for (let f = 0; f < this.F; f++) {
+        first += qt[3 * f];
+        this.tris[3 * f] = first;
+        this.tris[3 * f + 1] = first + qt[3 * f + 1];
+        this.tris[3 * f + 2] = first + qt[3 * f + 2];
+      }
+      if (a.colors) this.colors = view(buf, a.colors);
+      else {  // a palette and an index into it per triangle (or vertex)
+        const palette = view(buf, a.palette), index = view(buf, a.colorIndex);
+        this.colors = new Uint8Array(3 * index.length);
+        for (let i = 0; i < index.length; i++) this.colors.set(palette.subarray(3 * index[i], 3 * index[i] + 3), 3 * i);
+      }
       const param = (p) => {
-        const v = view(buf, a[p.key + ".v"]).slice(), xy = view(buf, a[p.key + ".xy"]), z = view(buf, a[p.key + ".z"]);
+        const v = view(buf, a[p.key + ".v"]).slice(), rows = view(buf, a[p.key + ".xy"]), z = view(buf, a[p.key + ".z"]);
         for (let m = 1; m < v.length; m++) v[m] += v[m - 1];  // stored as gaps
         if (p.residual) {  // inner keyforms: differences from the linear prediction floor(w * last + 1/2)
           const w = p.axes[0], S = w.length, M = v.length;
@@ -108,8 +138,15 @@
               for (let i = 0; i < M * n; i++) arr[s * M * n + i] += Math.floor(w[s] * arr[last + i] + 0.5);
             }
           };
-          unpack(xy, 2);
+          unpack(rows, 2);
           unpack(z, 1);
+        }
+        const M = v.length, S = p.axes[0].length, xy = new Int32Array(2 * M * S);
+        for (let s = 0; s < S; s++) {  // each keyform stored as its x row, then its y row
+          for (let i = 0; i < M; i++) {
+            xy[2 * (s * M + i)] = rows[2 * s * M + i];
+            xy[2 * (s * M + i) + 1] = rows[(2 * s + 1) * M + i];
+          }
         }
         return Object.assign({}, p, { v, xy, z });
       };
@@ -148,12 +185,12 @@
 
     addKeyform(p, s, f, xy, z) {
       if (!f) return;
-      const M = p.v.length, off = s * M, sx = f * p.xyStep, sz = f * p.zStep;
+      const ids = p.v, dxy = p.xy, dz = p.z, M = ids.length, off = s * M, sx = f * p.xyStep, sz = f * p.zStep;
       for (let m = 0; m < M; m++) {
-        const vi = p.v[m], q = off + m;
-        xy[2 * vi] += sx * p.xy[2 * q];
-        xy[2 * vi + 1] += sx * p.xy[2 * q + 1];
-        z[vi] += sz * p.z[q];
+        const vi = ids[m], q = off + m;
+        xy[2 * vi] += sx * dxy[2 * q];
+        xy[2 * vi + 1] += sx * dxy[2 * q + 1];
+        z[vi] += sz * dz[q];
       }
     }
 
@@ -185,33 +222,56 @@
       const turnEyes = this.eyes.map((e, k) => eyes[2 * k] || eyes[2 * k + 1]);
       if (!turnHead && !turnEyes.some(Boolean)) return;
       // Rigid turns in world space, as blendshapes.drive turns the morphed face: eyes about their centres, then
-      // the head about its pivot (R = Ry Rx Rz), projected again.
+      // the head about its pivot (R = Ry Rx Rz), projected again. A vertex no eye turns goes through one matrix:
+      // project . turn about the pivot . unproject, applied to its pixel and depth.
       const q = this.q, t = [0, 0, 0], m = this.meta.matrix, W = this.meta.width, H = this.meta.height;
-      const mark = turnHead ? null : new Uint8Array(this.V);
-      const lift = (v) => {
-        this.unproject(xy[2 * v], xy[2 * v + 1], z[v], t);
-        q[3 * v] = t[0]; q[3 * v + 1] = t[1]; q[3 * v + 2] = t[2];
-      };
-      if (turnHead) for (let v = 0; v < this.V; v++) lift(v);
+      const turned = this.turned || (this.turned = new Uint8Array(this.V));
+      turned.fill(0);
       this.eyes.forEach((e, k) => {
         if (!turnEyes[k]) return;
         const r = rotation(eyes[2 * k], eyes[2 * k + 1], 0), [cx, cy, cz] = e.centre;
         for (const v of e.v) {
-          if (mark) { lift(v); mark[v] = 1; }
+          if (!turned[v]) {
+            this.unproject(xy[2 * v], xy[2 * v + 1], z[v], t);
+            q[3 * v] = t[0]; q[3 * v + 1] = t[1]; q[3 * v + 2] = t[2];
+            turned[v] = 1;
+          }
           turn(q, 3 * v, r, cx, cy, cz);
         }
       });
       const [px, py, pz] = this.meta.pivot, r = turnHead ? rotation(yaw, pitch, roll) : null;
+      const c = r ? product(m, product([r[0], r[1], r[2], px - r[0] * px - r[1] * py - r[2] * pz,
+                                        r[3], r[4], r[5], py - r[3] * px - r[4] * py - r[5] * pz,
+                                        r[6], r[7], r[8], pz - r[6] * px - r[7] * py - r[8] * pz,
+                                        0, 0, 0, 1], this.meta.inverse)) : null;
       for (let v = 0; v < this.V; v++) {
-        if (mark && !mark[v]) continue;
-        if (r) turn(q, 3 * v, r, px, py, pz);
-        const X = q[3 * v], Y = q[3 * v + 1], Z = q[3 * v + 2];
-        const cw = m[12] * X + m[13] * Y + m[14] * Z + m[15];
-        xy[2 * v] = ((m[0] * X + m[1] * Y + m[2] * Z + m[3]) / cw + 1) * 0.5 * W;
-        xy[2 * v + 1] = (1 - (m[4] * X + m[5] * Y + m[6] * Z + m[7]) / cw) * 0.5 * H;
-        z[v] = (m[8] * X + m[9] * Y + m[10] * Z + m[11]) / cw;
+        if (turned[v]) {
+          if (r) turn(q, 3 * v, r, px, py, pz);
+          const X = q[3 * v], Y = q[3 * v + 1], Z = q[3 * v + 2];
+          const cw = m[12] * X + m[13] * Y + m[14] * Z + m[15];
+          xy[2 * v] = ((m[0] * X + m[1] * Y + m[2] * Z + m[3]) / cw + 1) * 0.5 * W;
+          xy[2 * v + 1] = (1 - (m[4] * X + m[5] * Y + m[6] * Z + m[7]) / cw) * 0.5 * H;
+          z[v] = (m[8] * X + m[9] * Y + m[10] * Z + m[11]) / cw;
+        } else if (c) {
+          const nx = 2 * xy[2 * v] / W - 1, ny = 1 - 2 * xy[2 * v + 1] / H, nz = z[v];
+          const cw = c[12] * nx + c[13] * ny + c[14] * nz + c[15];
+          xy[2 * v] = ((c[0] * nx + c[1] * ny + c[2] * nz + c[3]) / cw + 1) * 0.5 * W;
+          xy[2 * v + 1] = (1 - (c[4] * nx + c[5] * ny + c[6] * nz + c[7]) / cw) * 0.5 * H;
+          z[v] = (c[8] * nx + c[9] * ny + c[10] * nz + c[11]) / cw;
+        }
       }
     }
+  }
+
+  // The product of two row-major 4x4 matrices.
+  function product(a, b) {
+    const o = new Array(16).fill(0);
+    for (let i = 0; i < 4; i++) {
+      for (let j = 0; j < 4; j++) {
+        for (let k = 0; k < 4; k++) o[4 * i + j] += a[4 * i + k] * b[4 * k + j];
+      }
+    }
+    return o;
   }
 
   // Ry(yaw) Rx(pitch) Rz(roll), row-major (converter.blendshapes.rotations).
@@ -232,7 +292,8 @@
     q[i + 2] = r[6] * x + r[7] * y + r[8] * z + cz;
   }
 
-  // WebGL: depth-tested triangles, back faces culled, corners rebuilt from the evaluated vertices each frame.
+  // WebGL: depth-tested triangles, back faces culled. WebGL2 uploads the evaluated vertices as a float texture each
+  // frame and the vertex shader fetches each corner's vertex; WebGL1 rebuilds the corners in JS.
   class GLView {
     constructor(canvas, model) {
       const opts = { antialias: false, preserveDrawingBuffer: true, alpha: true, premultipliedAlpha: false };
@@ -240,9 +301,16 @@
       if (!gl) throw new Error("no WebGL");
       this.gl = gl;
       this.model = model;
-      const vs = "attribute vec3 p; attribute vec3 c; varying vec3 vc;" +
-                 "void main(){ vc = c; gl_Position = vec4(p, 1.0); }";
-      const fs = "precision mediump float; varying vec3 vc; void main(){ gl_FragColor = vec4(vc, 1.0); }";
+      const two = typeof window.WebGL2RenderingContext !== "undefined" && gl instanceof window.WebGL2RenderingContext;
+      const vs = two ?
+        "#version 300 es\nprecision highp float; precision highp int; in int p; in vec3 c; out vec3 vc;" +
+        "uniform highp sampler2D pos; uniform vec2 scale; void main(){ int w = textureSize(pos, 0).x;" +
+        " vec3 q = texelFetch(pos, ivec2(p % w, p / w), 0).xyz; vc = c;" +
+        " gl_Position = vec4(q.x * scale.x - 1.0, 1.0 - q.y * scale.y, q.z, 1.0); }" :
+        "attribute vec3 p; attribute vec3 c; varying vec3 vc; void main(){ vc = c; gl_Position = vec4(p, 1.0); }";
+      const fs = two ?
+        "#version 300 es\nprecision mediump float; in vec3 vc; out vec4 o; void main(){ o = vec4(vc, 1.0); }" :
+        "precision mediump float; varying vec3 vc; void main(){ gl_FragColor = vec4(vc, 1.0); }";
       const shader = (type, src) => {
         const s = gl.createShader(type);
         gl.shaderSource(s, src);
@@ -266,12 +334,31 @@
           rgb.set(colors.subarray(src, src + 3), 9 * f + 3 * c);
         }
       }
-      this.corners = new Float32Array(9 * F);
       this.pos = gl.createBuffer();
       gl.bindBuffer(gl.ARRAY_BUFFER, this.pos);
-      gl.bufferData(gl.ARRAY_BUFFER, this.corners, gl.DYNAMIC_DRAW);
       gl.enableVertexAttribArray(0);
-      gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
+      if (two) {  // each corner's vertex id; the vertices in an RGBA float texture, TW texels a row
+        gl.bufferData(gl.ARRAY_BUFFER, tris, gl.STATIC_DRAW);
+        gl.vertexAttribIPointer(0, 1, gl.INT, 0, 0);
+        this.TW = Math.min(Math.max(model.V, 1), 2048);
+        this.TH = Math.ceil(Math.max(model.V, 1) / this.TW);
+        this.texels = new Float32Array(4 * this.TW * this.TH);
+        this.tex = gl.createTexture();
+        gl.activeTexture(gl.TEXTURE0);
+        gl.bindTexture(gl.TEXTURE_2D, this.tex);
+        gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
+        gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+        gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
+        gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
+        gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, this.TW, this.TH, 0, gl.RGBA, gl.FLOAT, this.texels);
+        gl.uniform1i(gl.getUniformLocation(prog, "pos"), 0);
+        gl.uniform2f(gl.getUniformLocation(prog, "scale"), 2 / model.meta.width, 2 / model.meta.height);
+      } else {
+        this.texels = null;
+        this.corners = new Float32Array(9 * F);
+        gl.bufferData(gl.ARRAY_BUFFER, this.corners, gl.DYNAMIC_DRAW);
+        gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
+      }
       const col = gl.createBuffer();
       gl.bindBuffer(gl.ARRAY_BUFFER, col);
       gl.bufferData(gl.ARRAY_BUFFER, rgb, gl.STATIC_DRAW);
@@ -291,6 +378,18 @@
     draw() {
       const gl = this.gl, m = this.model, xy = m.xy, z = m.z, tris = m.tris, out = this.corners;
       const sx = 2 / m.meta.width, sy = 2 / m.meta.height, n = 3 * m.F;
+      if (this.texels) {
+        const t = this.texels, V = m.V;
+        for (let v = 0; v < V; v++) {
+          t[4 * v] = xy[2 * v];
+          t[4 * v + 1] = xy[2 * v + 1];
+          t[4 * v + 2] = z[v];
+        }
+        gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, this.TW, this.TH, gl.RGBA, gl.FLOAT, t);
+        gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
+        gl.drawArrays(gl.TRIANGLES, 0, n);
+        return;
+      }
       for (let i = 0; i < n; i++) {
         const v = tris[i];
         out[3 * i] = xy[2 * v] * sx - 1;

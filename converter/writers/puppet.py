@@ -5,14 +5,18 @@ The page carries three blocks and the inlined script (converter/writers/puppet.j
 - `puppet-meta` (JSON): viewport, the camera's world -> clip matrix and its inverse, the head's pivot and eyes'
   centres, the parameters (name, keyform weights, steps, VRM rules), the capture-name aliases, each array's place
   in the data block;
-- `puppet-data`: the arrays, little-endian, each 4-byte aligned, int16 tables as byte planes (low bytes, then
-  high bytes: deflate finds the low bytes' runs), deflated (zlib) and base64;
+- `puppet-data`: the arrays, little-endian, each 4-byte aligned, small signed integers zigzag-coded (0, -1, 1,
+  -2, ...) as uint16 byte planes (low bytes, then high bytes: deflate finds the runs), deflated (zlib) and base64.
+  The neutral positions are integers on the model's grid, coded as differences from the previous vertex (x column,
+  then y); a triangle as the gap from the previous triangle's first corner and its other corners' offsets from it;
+  a table's keyforms as x row then y row; the colours as a palette and indices;
 - `puppet-take`: the embedded capture (model.Take) the same way, its own JSON in `data-meta`; `replace_take`
   swaps it for another without touching the rest (`facesvg puppet-take`).
 
-The script draws with WebGL (depth-tested triangles, positions summed in JS each frame) or, without WebGL, with
-canvas 2D (back faces dropped, triangles in depth order). It evaluates no strings and fetches nothing; the only
-connection it opens is the WebSocket a user names (`?live=ws://...` or the Live field).
+The script draws with WebGL (depth-tested triangles, positions summed in JS each frame; WebGL2 uploads them as a
+float texture the vertex shader reads) or, without WebGL, with canvas 2D (back faces dropped, triangles in depth
+order). It evaluates no strings and fetches nothing; the only connection it opens is the WebSocket a user names
+(`?live=ws://...` or the Live field).
 """
 
 from __future__ import annotations
@@ -29,10 +33,10 @@ import numpy as np
 
 from converter.errors import InputError
 from converter.options import ConversionOptions, Progress, Report, no_progress
-from converter.puppet.model import EYE_UNIT, HEAD_UNIT, Parameter, Puppet, Take
+from converter.puppet.model import EYE_UNIT, HEAD_UNIT, NEUTRAL_XY_STEP, NEUTRAL_Z_STEP, Parameter, Puppet, Take
 
 FORMAT = "facesvg-puppet"
-VERSION = 1
+VERSION = 2  # 2: integer neutral positions, zigzag planes, colour palette
 MARKER = '<meta name="generator" content="facesvg puppet">'
 META_ID, DATA_ID, TAKE_ID = "puppet-meta", "puppet-data", "puppet-take"
 _TAKE = re.compile(rb'<script type="application/octet-stream" id="puppet-take"[^>]*>[^<]*</script>')
@@ -63,7 +67,7 @@ class _Packer:
         kind = {np.dtype(np.float32): "f4", np.dtype(np.int32): "i4", np.dtype(np.int16): "i2",
                 np.dtype(np.uint8): "u1", np.dtype(np.int8): "i1", np.dtype(np.uint16): "u2"}[a.dtype]
         raw = a.astype(a.dtype.newbyteorder("<"), copy=False).tobytes()
-        if planes and a.dtype.itemsize == 2:
+        if planes and a.dtype.itemsize == 2:  # "i2p" / "u2p"
             b = np.frombuffer(raw, np.uint8).reshape(-1, 2)
             raw = b[:, 0].tobytes() + b[:, 1].tobytes()
             kind += "p"
@@ -71,6 +75,15 @@ class _Packer:
         pad = -len(raw) % 4
         self.parts.append(raw + b"\0" * pad)
         self.size += len(raw) + pad
+
+    def ints(self, name: str, a: np.ndarray) -> None:
+        """Append signed integers: zigzag uint16 byte planes where they fit int16, else int32."""
+        a = np.asarray(a, np.int64).ravel()
+        if a.size and (a.min() < -32768 or a.max() > 32767):
+            self.add(name, a.astype(np.int32))
+            return
+        self.add(name, ((a << 1) ^ (a >> 63)).astype(np.uint16), planes=True)
+        self.index[name][1] = "zp"
 
     def bytes(self) -> bytes:
         """The block."""
@@ -99,11 +112,11 @@ def _parameter(p: Parameter, key: str, packer: _Packer) -> dict:
     keyforms as residuals from the linear prediction where they fit."""
     t = p.table
     gaps = np.diff(t.vertices.astype(np.int64), prepend=0).astype(np.int32)
-    packer.add(key + ".v", gaps)
+    packer.ints(key + ".v", gaps)
     rxy, rz = _residuals(t.xy, p.axes[0]), _residuals(t.z, p.axes[0])
     residual = rxy is not None and rz is not None and len(p.axes[0]) > 2
-    packer.add(key + ".xy", rxy if residual else t.xy, planes=True)
-    packer.add(key + ".z", rz if residual else t.z, planes=True)
+    packer.ints(key + ".xy", np.moveaxis(rxy if residual else t.xy, 2, 1))  # (S, 2, M): x row, then y row
+    packer.ints(key + ".z", rz if residual else t.z)
     doc = {"name": p.name, "axes": [[float(x) for x in a] for a in p.axes],
            "xyStep": t.xy_step, "zStep": t.z_step, "key": key, "moved": int(len(t.vertices))}
     if residual:
@@ -115,17 +128,35 @@ def _parameter(p: Parameter, key: str, packer: _Packer) -> dict:
     return doc
 
 
+def _colors(colors: np.ndarray, packer: _Packer) -> None:
+    """Add the colours as a palette (in order of first use) and uint16 indices into it, or as they are where more
+    than 65,536 differ."""
+    rgb = np.ascontiguousarray(colors.astype(np.uint8).reshape(len(colors), -1))
+    palette, first, index = np.unique(rgb, axis=0, return_index=True, return_inverse=True)
+    if len(palette) > 65536:
+        packer.add("colors", rgb)
+        return
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    packer.add("palette", palette[order])
+    packer.add("colorIndex", rank[index.ravel()].astype(np.uint16), planes=True)
+
+
 def encode(puppet: Puppet) -> tuple[dict, bytes]:
     """The metadata and the (raw) data block of a puppet."""
     packer = _Packer()
     m = puppet.camera.projection @ puppet.camera.view  # world -> clip, row-major: the player's unproject and project
-    packer.add("xy", puppet.xy.astype(np.float32))
-    packer.add("z", puppet.z.astype(np.float32))
-    packer.add("tris", np.diff(puppet.triangles.astype(np.int64).ravel(), prepend=0).astype(np.int32))  # as gaps
-    packer.add("colors", puppet.colors.astype(np.uint8))
+    qxy = np.rint(puppet.xy.astype(np.float64) / NEUTRAL_XY_STEP).astype(np.int64)
+    packer.ints("xy", np.diff(qxy, axis=0, prepend=0).T)
+    packer.ints("z", np.diff(np.rint(puppet.z.astype(np.float64) / NEUTRAL_Z_STEP).astype(np.int64), prepend=0))
+    t = puppet.triangles.astype(np.int64).reshape(-1, 3)
+    packer.ints("tris", np.c_[np.diff(t[:, 0], prepend=0), t[:, 1:] - t[:, :1]])
+    _colors(puppet.colors, packer)
     meta = {
         "format": FORMAT, "version": VERSION, "name": puppet.name, "width": puppet.width, "height": puppet.height,
-        "vertices": int(len(puppet.xy)), "triangles": int(len(puppet.triangles)), "gouraud": puppet.gouraud,
+        "xyUnit": NEUTRAL_XY_STEP, "zUnit": NEUTRAL_Z_STEP, "vertices": int(len(puppet.xy)),
+        "triangles": int(len(puppet.triangles)), "gouraud": puppet.gouraud,
         "pivot": [float(x) for x in puppet.pivot],
         "matrix": [float(x) for x in m.ravel()], "inverse": [float(x) for x in np.linalg.inv(m).ravel()],
         "morphs": [_parameter(p, f"m{k}", packer) for k, p in enumerate(puppet.morphs)],
@@ -136,7 +167,7 @@ def encode(puppet: Puppet) -> tuple[dict, bytes]:
         "info": {k: v for k, v in puppet.info.items() if isinstance(v, (int, float, str))},
     }
     for k, ids in enumerate(puppet.eyes):
-        packer.add(f"e{k}.v", ids.astype(np.int32))
+        packer.ints(f"e{k}.v", ids)
     meta["arrays"] = packer.index
     return meta, packer.bytes()
 
@@ -223,12 +254,35 @@ def array(block: bytes, entry: list) -> np.ndarray:
     """One array of a block from its index entry [offset, dtype, length] (byte planes put back together)."""
     offset, kind, n = entry
     planes = kind.endswith("p")
-    dtype = np.dtype("<" + kind.rstrip("p"))
+    dtype = np.dtype("<u2" if kind == "zp" else "<" + kind.rstrip("p"))
     raw = block[offset:offset + n * dtype.itemsize]
     if planes:
         b = np.frombuffer(raw, np.uint8)
         raw = np.stack([b[:n], b[n:]], axis=1).tobytes()
-    return np.frombuffer(raw, dtype).copy()
+    out = np.frombuffer(raw, dtype).copy()
+    if kind == "zp":
+        u = out.astype(np.int64)
+        return (u >> 1) ^ -(u & 1)
+    return out
+
+
+def decode_mesh(block: bytes, meta: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The neutral (xy (V, 2) px, z (V,)) and triangles (F, 3) from the block, as the script reads them."""
+    a, v = meta["arrays"], meta["vertices"]
+    q = np.cumsum(array(block, a["xy"]).reshape(2, v), axis=1).T
+    z = np.cumsum(array(block, a["z"])) * meta["zUnit"]
+    t = array(block, a["tris"]).reshape(-1, 3)
+    first = np.cumsum(t[:, 0])
+    tris = np.c_[first, first + t[:, 1], first + t[:, 2]]
+    return (q * meta["xyUnit"]).astype(np.float32), z.astype(np.float32), tris
+
+
+def decode_colors(block: bytes, meta: dict) -> np.ndarray:
+    """The (N, 3) uint8 colours from the block (palette and indices, or as they are)."""
+    a = meta["arrays"]
+    if "colors" in a:
+        return array(block, a["colors"]).reshape(-1, 3)
+    return array(block, a["palette"]).reshape(-1, 3)[array(block, a["colorIndex"]).astype(np.int64)]
 
 
 def decode_parameter(block: bytes, meta: dict, doc: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -236,7 +290,7 @@ def decode_parameter(block: bytes, meta: dict, doc: dict) -> tuple[np.ndarray, n
     a = meta["arrays"]
     ids = np.cumsum(array(block, a[doc["key"] + ".v"]).astype(np.int64))
     s, m = len(doc["axes"][0]), len(ids)
-    xy = array(block, a[doc["key"] + ".xy"]).astype(np.int64).reshape(s, m, 2)
+    xy = np.moveaxis(array(block, a[doc["key"] + ".xy"]).astype(np.int64).reshape(s, 2, m), 1, 2).copy()
     z = array(block, a[doc["key"] + ".z"]).astype(np.int64).reshape(s, m)
     if doc.get("residual"):
         for k in range(1, s - 1):

@@ -76,8 +76,12 @@ def test_blocks_decode_to_the_puppet(face_path):
     meta, data, take_meta, take = writer.read_blocks(writer.write(puppet, ConversionOptions(), Report()))
     assert take_meta is None and take == b""
     a = meta["arrays"]
-    assert np.array_equal(writer.array(data, a["xy"]).reshape(-1, 2), puppet.xy)
-    assert np.array_equal(np.cumsum(writer.array(data, a["tris"])).reshape(-1, 3), puppet.triangles)
+    xy, z, tris = writer.decode_mesh(data, meta)
+    assert np.array_equal(xy, puppet.xy) and np.array_equal(z, puppet.z)
+    assert np.array_equal(tris, puppet.triangles)
+    assert np.array_equal(writer.decode_colors(data, meta), puppet.colors.reshape(len(puppet.colors), -1))
+    assert len(writer.array(data, a["palette"])) < puppet.colors.size
+    assert a["xy"][1] == a["tris"][1] == "zp"  # small integers, zigzag byte planes
     residual = 0
     for k, p in enumerate(puppet.morphs):
         ids, xy, z = writer.decode_parameter(data, meta, meta["morphs"][k])
@@ -87,6 +91,15 @@ def test_blocks_decode_to_the_puppet(face_path):
         residual += bool(meta["morphs"][k].get("residual"))
     assert residual >= 1  # jawOpen's inner keyforms are stored as differences from the linear prediction
     assert np.array_equal(writer.array(data, a["e0.v"]), puppet.eyes[0])
+
+
+def test_neutral_positions_are_on_the_stored_grid(puppet, face):
+    """The neutral face is snapped to 1/16 px (and 2^-16 in depth) so the package stores it exactly as integers."""
+    q = puppet.xy.astype(np.float64) * 16
+    assert np.array_equal(q, np.rint(q))
+    xy, z, _ = puppet.camera.project(face.base[puppet.source_vertices])
+    assert 0 < np.abs(puppet.xy - xy).max() <= 1 / 32 + 1e-4
+    assert np.abs(puppet.z - z).max() <= 2.0 ** -17 + 1e-6
 
 
 def test_page_evaluates_no_strings_and_fetches_nothing(llf_result):
