@@ -3,7 +3,8 @@
 Faces: the tests' generated face (tests/puppet/faces.py), and where ../shared/data exists the ICT FaceKit head and
 the Ready Player Me avatar, each with the real Live Link Face take (livelinkface_MySlate_3.csv) embedded and a
 4,000-frame take of the same 61 columns. Build CPU is the puppet stage and the writer (loading the face and the
-capture is the loaders' cost, shown apart); the package is the HTML without a take, raw and gzipped.
+capture is the loaders' cost, shown apart); the package is the HTML without a take, raw and gzipped. Playback
+(issue 52): each face with the Live Link Face take playing, rAF fps in Chromium (1x, 4x), Firefox ESR and WebKitGTK.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from converter.options import ConversionOptions, Report
 from converter.puppet import from_track, puppet_of
 from converter.writers import puppet as writer
 from tests.conftest import chromium_path, launched_chromium
+from tests.engines import firefox_path, launched_firefox, launched_webkit, webkit_paths
 from tests.puppet.faces import face_zip
 from tests.reference import threejs
 
@@ -45,6 +47,21 @@ DRAW_LOOP = """async (n) => {
   for (let i = 0; i < n; i++) puppet.seek((i % 97) / 97 * Math.max(puppet.duration, 0.01));
   return (performance.now() - t0) / n;
 }"""
+WARM_S, PLAY_S = 1.0, 5.0  # the take plays this long before rAF is counted over PLAY_S (as bench/playback.py)
+# rAF callbacks and frames the puppet drew over `secs` after `warm` seconds of play; `done` gets the counts.
+_FPS_BODY = """setTimeout(() => {
+  let n = 0, t0 = null, t1 = null;
+  const f0 = puppet.frames;
+  const tick = (t) => {
+    if (t0 === null) t0 = t; else { n++; t1 = t; }
+    if (t1 !== null && t1 - t0 >= secs * 1000)
+      done({n, dt: t1 - t0, drawn: puppet.frames - f0, renderer: puppet.renderer, playing: puppet.playing});
+    else requestAnimationFrame(tick);
+  };
+  requestAnimationFrame(tick);
+}, warm * 1000);"""
+FPS_PAGE = "([warm, secs]) => new Promise((done) => {" + _FPS_BODY + "})"  # Playwright
+FPS_SESSION = "const [warm, secs, done] = arguments;" + _FPS_BODY  # WebDriver / Marionette
 
 
 def draw_ms(pages: list[bytes]) -> list[tuple[float, float, str]]:
@@ -70,8 +87,80 @@ def draw_ms(pages: list[bytes]) -> list[tuple[float, float, str]]:
     return out
 
 
-def measure(label: str, path: Path, takes: list[Path], played: list[bytes]) -> list[str]:
-    """Table rows for one face: the puppet alone, then with each take embedded (the last one kept in played)."""
+def _fps(got: dict) -> tuple[float, float, str]:
+    """(rAF fps, frames drawn a second, renderer) from FPS_BODY's counts."""
+    dt = max(float(got["dt"]), 1.0) / 1000.0
+    playing = "" if got["playing"] else " (not playing)"
+    return got["n"] / dt, got["drawn"] / dt, got["renderer"] + playing
+
+
+def chromium_fps(pages: list[bytes]) -> dict[str, list[tuple[float, float, str]]]:
+    """Per throttling (1x, THROTTLE x): each playing page's fps in headless Chromium; {} without it."""
+    exe = chromium_path()
+    if not exe:
+        return {}
+    out: dict[str, list[tuple[float, float, str]]] = {}
+    with launched_chromium(exe) as browser, tempfile.TemporaryDirectory() as tmp:
+        for rate in (1, THROTTLE):
+            column = out.setdefault(f"Chromium {rate}x", [])
+            for k, data in enumerate(pages):
+                path = Path(tmp) / f"p{k}.html"
+                path.write_bytes(data)
+                page = browser.new_page(viewport={"width": 1024, "height": 800})
+                page.context.new_cdp_session(page).send("Emulation.setCPUThrottlingRate", {"rate": rate})
+                page.goto(path.as_uri())
+                page.wait_for_function("() => document.documentElement.dataset.puppet", timeout=300000)
+                column.append(_fps(page.evaluate(FPS_PAGE, [WARM_S, PLAY_S])))
+                page.close()
+    return out
+
+
+def engine_fps(pages: list[bytes]) -> tuple[dict[str, list[tuple[float, float, str]]], list[str]]:
+    """Each playing page's fps in Firefox ESR and WebKitGTK (tests/engines.py), and notes on missing engines."""
+    engines, notes = [], []
+    if firefox_path():
+        engines.append(("Firefox ESR", lambda: launched_firefox(firefox_path())))
+    else:
+        notes.append("Firefox ESR is not installed: no Firefox column.")
+    if webkit_paths():
+        engines.append(("WebKitGTK", lambda: launched_webkit(*webkit_paths())))
+    else:
+        notes.append("WebKitGTK's WebKitWebDriver, MiniBrowser or Xvfb is missing: no WebKit column.")
+    out: dict[str, list[tuple[float, float, str]]] = {}
+    for name, launch in engines:
+        with launch() as session:
+            column = out.setdefault(name, [])
+            for data in pages:
+                session.load(data.decode("utf-8"))
+                session.wait_for("document.documentElement.dataset.puppet", timeout=300)
+                column.append(_fps(session.run_async(FPS_SESSION, WARM_S, PLAY_S)))
+    return out, notes
+
+
+def fps_table(labels: list[str], pages: list[bytes]) -> str:
+    """Markdown: the playing puppet's fps per face and engine (issue 52's targets), or "" without any browser."""
+    columns = chromium_fps(pages)
+    more, notes = engine_fps(pages)
+    columns.update(more)
+    if not columns:
+        return ""
+    names = list(columns)
+    rows = [f"| {label} | " + " | ".join(f"{columns[n][i][0]:.1f} / {columns[n][i][1]:.1f} ({columns[n][i][2]})"
+                                        for n in names) + " |" for i, label in enumerate(labels)]
+    return (f"\n\nPlayback (issue 52: >= 60 fps at {THROTTLE}x in Chromium, >= 50 fps in WebKitGTK and Firefox ESR): each face "
+            f"with the Live Link Face take ({LLF.name}) embedded, playing on load; after {WARM_S:g} s of play, "
+            f"requestAnimationFrame callbacks a second over {PLAY_S:g} s / frames the puppet drew a second "
+            "(window.puppet.frames), and its renderer (window.puppet.renderer; headless Firefox has no WebGL, so "
+            "the canvas 2D fallback). Chromium headless (SwiftShader), Firefox ESR headless, WebKitGTK's "
+            "MiniBrowser on Xvfb; only Chromium is throttled (DevTools CPU throttling).\n\n"
+            "| face | " + " | ".join(names) + " |\n|---|" + "---|" * len(names) + "\n" + "\n".join(rows)
+            + "".join(f"\n\n{note}" for note in notes))
+
+
+def measure(label: str, path: Path, takes: list[Path], played: list[bytes],
+            live: list[bytes] | None = None) -> list[str]:
+    """Table rows for one face: the puppet alone, then with each take embedded (the last one kept in played, the
+    Live Link Face one in live)."""
     c0 = time.process_time()
     face = load_morph_face(path)
     load_s = time.process_time() - c0
@@ -93,6 +182,8 @@ def measure(label: str, path: Path, takes: list[Path], played: list[bytes]) -> l
         extra = len(with_take) - len(page)
         extra_gz = len(gzip.compress(with_take, 9)) - zipped
         played.append(with_take) if take_path == takes[-1] else None
+        if take_path == LLF and live is not None:
+            live.append(with_take)
         rows.append(f"| ... + take of {take.n_frames:,} frames ({len(take.names)} weights) | | | | | {take_s:.2f} | "
                     f"+{extra / 1024:,.1f} | +{extra_gz / 1024:,.1f} | {take.bytes_per_frame} | "
                     f"{extra / take.n_frames:.1f} / {extra_gz / take.n_frames:.1f} |")
@@ -129,6 +220,7 @@ def run() -> str:
             "|---|---|---|---|---|---|---|---|---|---|")
     rows: list[str] = []
     played: list[bytes] = []
+    live: list[bytes] = []
     labels = []
     with tempfile.TemporaryDirectory() as tmp:
         generated = Path(tmp) / "generated.zip"
@@ -142,7 +234,7 @@ def run() -> str:
                  ("Ready Player Me avatar (rpm_template_xr.glb)", RPM)]
         for label, path in faces:
             if path.exists():
-                rows += measure(label, path, takes or [LLF], played)
+                rows += measure(label, path, takes or [LLF], played, live)
                 labels.append(label)
         sweep = angle_limit([(label, path) for label, path in faces if path.exists()])
     note = "" if ICT.exists() else "\n\n../shared/data is missing: only the generated face was measured."
@@ -152,4 +244,5 @@ def run() -> str:
                  f"evaluate and draw a frame (mean of {DRAWS}), unthrottled and at {THROTTLE}x CPU throttling:\n\n"
                  "| face | renderer | ms a frame | ms at 4x |\n|---|---|---|---|\n" +
                  "\n".join(f"| {label} | {r} | {a:.1f} | {b:.1f} |" for label, (a, b, r) in zip(labels, timing)))
-    return head + "\n" + "\n".join(rows) + note + sweep
+    fps = fps_table(labels, live) if live else ""
+    return head + "\n" + "\n".join(rows) + note + fps + sweep
