@@ -18,10 +18,11 @@ from converter.errors import InputError
 from converter.formats.morphs import MorphFace, load_morph_face
 from converter.formats.weights import read_weights
 from converter.options import ConversionOptions, Progress, Report, no_progress
-from converter.puppet.model import Parameter, Puppet, Table, Take, build, pose, resolve
+from converter.puppet.model import Parameter, Puppet, Table, Take, build, pose, resolve, shade
 from converter.puppet.take import from_track
 
 __all__ = ["Parameter", "Puppet", "Table", "Take", "build", "from_track", "load", "pose", "puppet_of", "resolve",
+           "shade",
            "stage"]
 
 FACE_KEY = "puppet_face"  # FaceAnimation.extras: the MorphFace the stage builds from

@@ -16,6 +16,10 @@ angle keyforms (Live2D's AngleX/AngleY, bilinear, a 7 x 7 grid every 10 degrees)
 1 px off between keyforms. The mesh holds every triangle front-facing at rest, under any single target at its
 keyforms, or at any angle of VISIBILITY_GRID: a turn beyond it may show a triangle the puppet lacks.
 
+Colour: the puppet keeps each triangle's (flat) or vertex's (Gouraud) rest normal (octahedral, 2 x int8) and unlit
+base colour, and the player lights them as converter.lighting does with the normals turned by the head (`shade`), so
+the face relights as it turns; morph displacements and eye turns keep their rest normals.
+
 A pose is exact for any single target at its keyforms combined with any head and eye angles (up to MOVE_PX, the
 least motion a table keeps, plus half a quantisation step XY_STEP), and approximate between keyforms and for
 several targets together (their 2D displacements add where their 3D ones do; perspective makes the two differ
@@ -129,6 +133,8 @@ class Puppet:
     keys: tuple[tuple[str, str], ...]  # normalised (base, side) of each morph name
     take: Take | None = None
     info: dict = field(default_factory=dict)
+    normals: np.ndarray | None = None  # int8 (F, 2) flat or (V, 2) Gouraud rest unit normals, octahedral * 127
+    base_colors: np.ndarray | None = None  # uint8 (F, 3) or (V, 3) unlit display base colours: the player relights
 
     @property
     def width(self) -> int:
@@ -283,13 +289,20 @@ def build(face: MorphFace, camera: Camera, gouraud: bool = False, progress: Prog
     tris = remap[faces[kept]].astype(np.int32)
     neutral = base[None]
     if gouraud:
-        base_rgb = srgb_to_linear(face.still(1.0).face_base_colors()[None])
-        rgb = lambert_linear(unit_vertex_normals(neutral, faces), base_rgb, camera.view, DEFAULT_LIGHTING)[0][used]
+        base_display = face.still(1.0).face_base_colors()
+        base_rgb = srgb_to_linear(base_display[None])
+        rest_normals = unit_vertex_normals(neutral, faces)
+        rgb = lambert_linear(rest_normals, base_rgb, camera.view, DEFAULT_LIGHTING)[0][used]
+        rest_normals, base_display = rest_normals[0][used], base_display[used]
     else:
-        tri_lin = np.take(srgb_to_linear(face.still(1.0).triangle_colors()[None]), kept, axis=1)
-        rgb = lambert_linear(unit_face_normals(neutral, faces), tri_lin, camera.view, DEFAULT_LIGHTING,
-                             rows=kept)[0]
+        base_display = face.still(1.0).triangle_colors()[kept]
+        tri_lin = srgb_to_linear(base_display[None])
+        rest_normals = unit_face_normals(neutral, faces)
+        rgb = lambert_linear(rest_normals, tri_lin, camera.view, DEFAULT_LIGHTING, rows=kept)[0]
+        rest_normals = rest_normals[0][kept]
     colors = np.clip(np.rint(rgb * 255), 0, 255).astype(np.uint8)
+    normals8 = octahedral(np.nan_to_num(rest_normals))
+    base8 = np.clip(np.rint(np.nan_to_num(base_display) * 255), 0, 255).astype(np.uint8)
     aliases = _aliases(face)
     info = {"vertices": int(len(used)), "triangles": int(len(kept)), "source_vertices": int(len(base)),
             "source_triangles": int(len(faces)), "morphs": n_k,
@@ -301,7 +314,37 @@ def build(face: MorphFace, camera: Camera, gouraud: bool = False, progress: Prog
     return Puppet(face.name, camera, snapped_xy, snapped_z,
                   used.astype(np.int32), tris, int(len(faces)), colors, bool(gouraud), pivot3.astype(np.float64),
                   morphs, eyes, np.array(centres, np.float64).reshape(-1, 3), aliases,
-                  tuple(normalise(n) for n in face.names), None, info)
+                  tuple(normalise(n) for n in face.names), None, info, normals8, base8)
+
+
+def octahedral(normals: np.ndarray) -> np.ndarray:
+    """int8 (N, 2) octahedral codes * 127 of unit normals (N, 3): the octahedron's faces folded onto a square."""
+    n = np.asarray(normals, np.float64)
+    o = n[:, :2] / np.maximum(np.abs(n).sum(axis=1, keepdims=True), 1e-12)
+    low = n[:, 2] < 0
+    o[low] = (1 - np.abs(o[low][:, ::-1])) * np.where(o[low] >= 0, 1.0, -1.0)
+    return np.clip(np.rint(o * 127), -127, 127).astype(np.int8)
+
+
+def unoctahedral(codes: np.ndarray) -> np.ndarray:
+    """Unit normals (N, 3) float64 of octahedral codes (N, 2) (the player's decoding)."""
+    o = np.asarray(codes, np.float64) / 127
+    z = 1 - np.abs(o).sum(axis=1)
+    t = np.maximum(-z, 0.0)[:, None]
+    xy = o - np.where(o >= 0, t, -t)
+    n = np.c_[xy, z]
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+
+
+def shade(puppet: Puppet, head: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> np.ndarray:
+    """uint8 (N, 3) display colours of the puppet's triangles (flat) or vertices (Gouraud) with the head turned
+    (yaw, pitch, roll radians): its stored rest normals turned by the head and lit as converter.lighting lights them
+    (what the player draws; morphs and eye turns keep their rest normals)."""
+    n = unoctahedral(puppet.normals)
+    r = rotations(np.array([list(head)], np.float64))[0]
+    lit = lambert_linear((n @ r.T).astype(np.float32), srgb_to_linear(puppet.base_colors / 255.0),
+                         puppet.camera.view, DEFAULT_LIGHTING)
+    return np.clip(np.rint(lit * 255), 0, 255).astype(np.uint8)
 
 
 def _aliases(face: MorphFace) -> dict[str, list[tuple[int, float]]]:

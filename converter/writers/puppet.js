@@ -127,6 +127,22 @@
         this.colors = new Uint8Array(3 * index.length);
         for (let i = 0; i < index.length; i++) this.colors.set(palette.subarray(3 * index[i], 3 * index[i] + 3), 3 * i);
       }
+      // unlit base colours and rest normals, lit as converter/lighting.py lights them; a normal is an octahedral
+      // int8 pair, each column stored as byte differences from the previous element (model.unoctahedral)
+      const cols = view(buf, a.normals), N = cols.length / 2;
+      this.normals = new Float32Array(3 * N);
+      let cu = 0, cv = 0;
+      for (let i = 0; i < N; i++) {
+        cu = (cu + cols[i]) & 255;
+        cv = (cv + cols[N + i]) & 255;
+        let x = (cu << 24 >> 24) / 127, y = (cv << 24 >> 24) / 127;
+        const z = 1 - Math.abs(x) - Math.abs(y), t = Math.max(-z, 0);
+        x -= x >= 0 ? t : -t;
+        y -= y >= 0 ? t : -t;
+        const l = Math.hypot(x, y, z) || 1;
+        this.normals[3 * i] = x / l; this.normals[3 * i + 1] = y / l; this.normals[3 * i + 2] = z / l;
+      }
+      this.head = [0, 0, 0];
       const param = (p) => {
         const v = view(buf, a[p.key + ".v"]).slice(), rows = view(buf, a[p.key + ".xy"]), z = view(buf, a[p.key + ".z"]);
         for (let m = 1; m < v.length; m++) v[m] += v[m - 1];  // stored as gaps
@@ -194,6 +210,27 @@
       }
     }
 
+    // The world direction towards the key light as the head's rest normals see it: R^T l, for n' = R n.
+    light() {
+      const l = this.meta.light.direction, [yaw, pitch, roll] = this.head;
+      if (!(yaw || pitch || roll)) return l;
+      const r = rotation(yaw, pitch, roll);
+      return [r[0] * l[0] + r[3] * l[1] + r[6] * l[2], r[1] * l[0] + r[4] * l[1] + r[7] * l[2],
+              r[2] * l[0] + r[5] * l[1] + r[8] * l[2]];
+    }
+
+    // Display colours (0..255, rounded) of each lit element (triangle or vertex) into out for light direction l:
+    // srgb(linear(base) * (ambient + diffuse * max(n.l, 0))), converter.lighting.lambert.
+    shade(l, out) {
+      const n = this.normals, amb = this.meta.light.ambient, dif = this.meta.light.diffuse;
+      const c = this.linear || (this.linear = Float32Array.from(this.colors, (v) => decode(v / 255)));
+      for (let i = 0; i < n.length / 3; i++) {
+        const g = amb + dif * Math.max(n[3 * i] * l[0] + n[3 * i + 1] * l[1] + n[3 * i + 2] * l[2], 0);
+        for (let k = 0; k < 3; k++) out[3 * i + k] = Math.round(255 * encode(Math.min(c[3 * i + k] * g, 1)));
+      }
+      return out;
+    }
+
     // World point of pixel (x, y) and NDC depth z into out[0..2]: the camera's inverse.
     unproject(x, y, z, out) {
       const m = this.meta.inverse, nx = 2 * x / this.meta.width - 1, ny = 1 - 2 * y / this.meta.height;
@@ -218,6 +255,7 @@
         if (i > 0) this.addKeyform(p, i, 1 - a, xy, z);  // keyform 0 (weight 0) moves nothing
         this.addKeyform(p, i + 1, a, xy, z);
       });
+      this.head = [head[0], head[1], head[2]];
       const [yaw, pitch, roll] = head, turnHead = yaw || pitch || roll;
       const turnEyes = this.eyes.map((e, k) => eyes[2 * k] || eyes[2 * k + 1]);
       if (!turnHead && !turnEyes.some(Boolean)) return;
@@ -263,6 +301,10 @@
     }
   }
 
+  // sRGB transfer curve (IEC 61966-2-1), as converter/lighting.py.
+  const decode = (c) => (c <= 0.04045 ? c / 12.92 : Math.pow((c + 0.055) / 1.055, 2.4));
+  const encode = (c) => (c <= 0.0031308 ? 12.92 * c : 1.055 * Math.pow(c, 1 / 2.4) - 0.055);
+
   // The product of two row-major 4x4 matrices.
   function product(a, b) {
     const o = new Array(16).fill(0);
@@ -302,12 +344,20 @@
       this.gl = gl;
       this.model = model;
       const two = typeof window.WebGL2RenderingContext !== "undefined" && gl instanceof window.WebGL2RenderingContext;
+      // the vertex shader lights each corner: its base colour c and rest normal n against the turned light
+      const lit = "uniform vec3 light; uniform vec2 rig;" +
+        " vec3 dec(vec3 c){ return mix(pow((c + 0.055) / 1.055, vec3(2.4)), c / 12.92, step(c, vec3(0.04045))); }" +
+        " vec3 enc(vec3 c){ return mix(1.055 * pow(max(c, vec3(1e-7)), vec3(1.0 / 2.4)) - 0.055, 12.92 * c," +
+        " step(c, vec3(0.0031308))); }" +
+        " vec3 shade(vec3 c, vec3 n){ float g = rig.x + rig.y * max(dot(normalize(n), light), 0.0);" +
+        " return enc(clamp(dec(c) * g, 0.0, 1.0)); }";
       const vs = two ?
-        "#version 300 es\nprecision highp float; precision highp int; in int p; in vec3 c; out vec3 vc;" +
-        "uniform highp sampler2D pos; uniform vec2 scale; void main(){ int w = textureSize(pos, 0).x;" +
-        " vec3 q = texelFetch(pos, ivec2(p % w, p / w), 0).xyz; vc = c;" +
+        "#version 300 es\nprecision highp float; precision highp int; in int p; in vec3 c; in vec3 n; out vec3 vc;" +
+        "uniform highp sampler2D pos; uniform vec2 scale; " + lit + " void main(){ int w = textureSize(pos, 0).x;" +
+        " vec3 q = texelFetch(pos, ivec2(p % w, p / w), 0).xyz; vc = shade(c, n);" +
         " gl_Position = vec4(q.x * scale.x - 1.0, 1.0 - q.y * scale.y, q.z, 1.0); }" :
-        "attribute vec3 p; attribute vec3 c; varying vec3 vc; void main(){ vc = c; gl_Position = vec4(p, 1.0); }";
+        "precision highp float; attribute vec3 p; attribute vec3 c; attribute vec3 n; varying vec3 vc; " + lit +
+        " void main(){ vc = shade(c, n); gl_Position = vec4(p, 1.0); }";
       const fs = two ?
         "#version 300 es\nprecision mediump float; in vec3 vc; out vec4 o; void main(){ o = vec4(vc, 1.0); }" :
         "precision mediump float; varying vec3 vc; void main(){ gl_FragColor = vec4(vc, 1.0); }";
@@ -323,15 +373,17 @@
       gl.attachShader(prog, shader(gl.FRAGMENT_SHADER, fs));
       gl.bindAttribLocation(prog, 0, "p");
       gl.bindAttribLocation(prog, 1, "c");
+      gl.bindAttribLocation(prog, 2, "n");
       gl.linkProgram(prog);
       if (!gl.getProgramParameter(prog, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(prog));
       gl.useProgram(prog);
       const F = model.F, tris = model.tris, colors = model.colors, gouraud = model.meta.gouraud;
-      const rgb = new Uint8Array(9 * F);
+      const rgb = new Uint8Array(9 * F), nrm = new Float32Array(9 * F), normals = model.normals;
       for (let f = 0; f < F; f++) {
         for (let c = 0; c < 3; c++) {
           const src = gouraud ? 3 * tris[3 * f + c] : 3 * f;
           rgb.set(colors.subarray(src, src + 3), 9 * f + 3 * c);
+          nrm.set(normals.subarray(src, src + 3), 9 * f + 3 * c);
         }
       }
       this.pos = gl.createBuffer();
@@ -364,6 +416,13 @@
       gl.bufferData(gl.ARRAY_BUFFER, rgb, gl.STATIC_DRAW);
       gl.enableVertexAttribArray(1);
       gl.vertexAttribPointer(1, 3, gl.UNSIGNED_BYTE, true, 0, 0);
+      const nb = gl.createBuffer();
+      gl.bindBuffer(gl.ARRAY_BUFFER, nb);
+      gl.bufferData(gl.ARRAY_BUFFER, nrm, gl.STATIC_DRAW);
+      gl.enableVertexAttribArray(2);
+      gl.vertexAttribPointer(2, 3, gl.FLOAT, false, 0, 0);
+      this.lightAt = gl.getUniformLocation(prog, "light");
+      gl.uniform2f(gl.getUniformLocation(prog, "rig"), model.meta.light.ambient, model.meta.light.diffuse);
       gl.enable(gl.DEPTH_TEST);
       gl.depthFunc(gl.LEQUAL);
       gl.enable(gl.CULL_FACE);
@@ -378,6 +437,7 @@
     draw() {
       const gl = this.gl, m = this.model, xy = m.xy, z = m.z, tris = m.tris, out = this.corners;
       const sx = 2 / m.meta.width, sy = 2 / m.meta.height, n = 3 * m.F;
+      gl.uniform3fv(this.lightAt, m.light());
       if (this.texels) {
         const t = this.texels, V = m.V;
         for (let v = 0; v < V; v++) {
@@ -409,8 +469,17 @@
       this.ctx = canvas.getContext("2d");
       this.model = model;
       this.kind = "canvas";
-      const F = model.F, tris = model.tris, c = model.colors;
       this.fill = [];
+      this.lit = new Uint8Array(model.colors.length);
+      this.depth = new Float32Array(model.F);
+      this.ids = new Uint32Array(model.F);
+    }
+
+    // Each triangle's fill for light direction l (a Gouraud puppet's triangle takes its corners' mean colour).
+    relight(l) {
+      const model = this.model, F = model.F, tris = model.tris, c = model.shade(l, this.lit);
+      this.fill.length = 0;
+      this.lightKey = l.join();
       for (let f = 0; f < F; f++) {
         let r, g, b;
         if (model.meta.gouraud) {
@@ -422,12 +491,11 @@
         }
         this.fill.push(`rgb(${Math.round(r)},${Math.round(g)},${Math.round(b)})`);
       }
-      this.depth = new Float32Array(F);
-      this.ids = new Uint32Array(F);
     }
 
     draw() {
-      const m = this.model, xy = m.xy, z = m.z, tris = m.tris, ctx = this.ctx;
+      const m = this.model, xy = m.xy, z = m.z, tris = m.tris, ctx = this.ctx, l = m.light();
+      if (l.join() !== this.lightKey) this.relight(l);
       let n = 0;
       for (let f = 0; f < m.F; f++) {
         const a = tris[3 * f], b = tris[3 * f + 1], c = tris[3 * f + 2];

@@ -9,7 +9,10 @@ The page carries three blocks and the inlined script (converter/writers/puppet.j
   -2, ...) as uint16 byte planes (low bytes, then high bytes: deflate finds the runs), deflated (zlib) and base64.
   The neutral positions are integers on the model's grid, coded as differences from the previous vertex (x column,
   then y); a triangle as the gap from the previous triangle's first corner and its other corners' offsets from it;
-  a table's keyforms as x row then y row; the colours as a palette and indices;
+  a table's keyforms as x row then y row; the unlit base colours as a palette and indices, and the rest normals
+  (per triangle when flat, per vertex when Gouraud) as octahedral int8 pairs, each column coded as byte differences
+  from the previous element (modulo 256: neighbours face alike, deflate finds the zeros): the player lights them as
+  converter/lighting.py does (`light` in the metadata), turned by the head, so the face relights as it turns;
 - `puppet-take`: the embedded capture (model.Take) the same way, its own JSON in `data-meta`; `replace_take`
   swaps it for another without touching the rest (`facesvg puppet-take`).
 
@@ -32,11 +35,12 @@ from importlib import resources
 import numpy as np
 
 from converter.errors import InputError
+from converter.lighting import DEFAULT_LIGHTING, light_direction_world
 from converter.options import ConversionOptions, Progress, Report, no_progress
 from converter.puppet.model import EYE_UNIT, HEAD_UNIT, NEUTRAL_XY_STEP, NEUTRAL_Z_STEP, Parameter, Puppet, Take
 
 FORMAT = "facesvg-puppet"
-VERSION = 2  # 2: integer neutral positions, zigzag planes, colour palette
+VERSION = 3  # 2: integer neutral positions, zigzag planes, colour palette; 3: unlit base colours and rest normals
 MARKER = '<meta name="generator" content="facesvg puppet">'
 META_ID, DATA_ID, TAKE_ID = "puppet-meta", "puppet-data", "puppet-take"
 _TAKE = re.compile(rb'<script type="application/octet-stream" id="puppet-take"[^>]*>[^<]*</script>')
@@ -152,12 +156,16 @@ def encode(puppet: Puppet) -> tuple[dict, bytes]:
     packer.ints("z", np.diff(np.rint(puppet.z.astype(np.float64) / NEUTRAL_Z_STEP).astype(np.int64), prepend=0))
     t = puppet.triangles.astype(np.int64).reshape(-1, 3)
     packer.ints("tris", np.c_[np.diff(t[:, 0], prepend=0), t[:, 1:] - t[:, :1]])
-    _colors(puppet.colors, packer)
+    _colors(puppet.base_colors, packer)
+    codes = puppet.normals.astype(np.int64)
+    packer.add("normals", np.ascontiguousarray((np.diff(codes, axis=0, prepend=0) % 256).astype(np.uint8).T))
     meta = {
         "format": FORMAT, "version": VERSION, "name": puppet.name, "width": puppet.width, "height": puppet.height,
         "xyUnit": NEUTRAL_XY_STEP, "zUnit": NEUTRAL_Z_STEP, "vertices": int(len(puppet.xy)),
         "triangles": int(len(puppet.triangles)), "gouraud": puppet.gouraud,
         "pivot": [float(x) for x in puppet.pivot],
+        "light": {"direction": [float(x) for x in light_direction_world(puppet.camera.view, DEFAULT_LIGHTING)],
+                  "diffuse": DEFAULT_LIGHTING.diffuse, "ambient": DEFAULT_LIGHTING.ambient},
         "matrix": [float(x) for x in m.ravel()], "inverse": [float(x) for x in np.linalg.inv(m).ravel()],
         "morphs": [_parameter(p, f"m{k}", packer) for k, p in enumerate(puppet.morphs)],
         "eyes": [{"key": f"e{k}", "centre": [float(x) for x in c]} for k, c in enumerate(puppet.eye_centres)],
@@ -277,8 +285,14 @@ def decode_mesh(block: bytes, meta: dict) -> tuple[np.ndarray, np.ndarray, np.nd
     return (q * meta["xyUnit"]).astype(np.float32), z.astype(np.float32), tris
 
 
+def decode_normals(block: bytes, meta: dict) -> np.ndarray:
+    """The (N, 2) int8 octahedral rest normals from the block (byte differences summed modulo 256)."""
+    d = array(block, meta["arrays"]["normals"]).reshape(2, -1).T.astype(np.int64)
+    return np.cumsum(d, axis=0).astype(np.uint8).view(np.int8)
+
+
 def decode_colors(block: bytes, meta: dict) -> np.ndarray:
-    """The (N, 3) uint8 colours from the block (palette and indices, or as they are)."""
+    """The (N, 3) uint8 unlit base colours from the block (palette and indices, or as they are)."""
     a = meta["arrays"]
     if "colors" in a:
         return array(block, a["colors"]).reshape(-1, 3)

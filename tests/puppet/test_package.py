@@ -79,8 +79,9 @@ def test_blocks_decode_to_the_puppet(face_path):
     xy, z, tris = writer.decode_mesh(data, meta)
     assert np.array_equal(xy, puppet.xy) and np.array_equal(z, puppet.z)
     assert np.array_equal(tris, puppet.triangles)
-    assert np.array_equal(writer.decode_colors(data, meta), puppet.colors.reshape(len(puppet.colors), -1))
-    assert len(writer.array(data, a["palette"])) < puppet.colors.size
+    assert np.array_equal(writer.decode_colors(data, meta), puppet.base_colors)
+    assert np.array_equal(writer.decode_normals(data, meta), puppet.normals)
+    assert len(writer.array(data, a["palette"])) < puppet.base_colors.size
     assert a["xy"][1] == a["tris"][1] == "zp"  # small integers, zigzag byte planes
     residual = 0
     for k, p in enumerate(puppet.morphs):

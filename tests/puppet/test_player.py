@@ -25,7 +25,7 @@ from converter import blendshapes, render
 from converter.formats.captures.base import WeightTrack
 from converter.formats.morphs import load_morph_face
 from converter.options import ConversionOptions, Report
-from converter.puppet import from_track, pose, puppet_of, resolve
+from converter.puppet import from_track, pose, puppet_of, resolve, shade
 from converter.puppet.take import frame_pose, frame_times
 from converter.writers import puppet as writer
 
@@ -238,3 +238,38 @@ def test_a_live_websocket_message_drives_the_puppet(browser, tmp_path, face):
     assert weights["browInnerUp"] == 0.5
     assert np.abs(got - want).max() <= JS_PX
     assert np.abs(got - puppet.xy).max() > 10
+
+
+def canvas_rgb(page) -> np.ndarray:
+    """The puppet canvas's RGB (H, W, 3) uint8."""
+    url = page.evaluate("() => document.getElementById('puppet-canvas').toDataURL('image/png')")
+    return np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("RGB")).astype(int)
+
+
+@pytest.mark.browser
+@pytest.mark.parametrize("renderer", ["webgl", "canvas"])
+def test_the_player_relights_the_turned_head(browser, tmp_path, face, renderer):
+    """Each big front triangle of the flat puppet with the head turned is drawn in model.shade's colour (the rest
+    normals turned and lit as converter/lighting.py lights them), not the colour baked at rest."""
+    puppet = puppet_of(face, ConversionOptions(size=256))
+    head = (math.radians(20), math.radians(-15), 0.2)
+    xy, _ = pose(puppet, np.zeros(len(puppet.morphs)), head=head)
+    want, rest = shade(puppet, head).astype(int), puppet.colors.astype(int)
+    corners = xy[puppet.triangles]
+    area = -0.5 * np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    changed = np.abs(want - rest).max(axis=1) >= 8
+    picks = np.flatnonzero(changed & (area > 0))
+    picks = picks[np.argsort(-area[picks])][:12]
+    assert len(picks) >= 6
+    query = "?paused" + ("&renderer=canvas" if renderer == "canvas" else "")
+    page = open_puppet(browser, tmp_path, writer.write(puppet, ConversionOptions(), Report()), query)
+    try:
+        page.evaluate("(h) => puppet.set({headYaw: h[0], headPitch: h[1], headRoll: h[2]}).render()", list(head))
+        image = canvas_rgb(page)
+    finally:
+        page.close()
+    centre = np.rint(corners[picks].mean(axis=1) - 0.5).astype(int)
+    got = image[centre[:, 1], centre[:, 0]]
+    close = np.abs(got - want[picks]).max(axis=1) <= 3  # a centre may fall on a nearer triangle: most must match
+    assert close.mean() >= 0.75, (got, want[picks])
+    assert (np.abs(got - rest[picks]).max(axis=1) > 3).mean() >= 0.75

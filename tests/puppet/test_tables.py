@@ -10,9 +10,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from converter import blendshapes
+from converter.extract import fit_camera, unit_face_normals, unit_vertex_normals
 from converter.formats.captures.base import WeightTrack
-from converter.puppet import pose
-from converter.puppet.model import MORPH_WEIGHTS, Z_LEVELS
+from converter.lighting import lambert
+from converter.puppet import pose, shade
+from converter.puppet.model import MORPH_WEIGHTS, Z_LEVELS, build
 
 QUANT_PX = 0.1  # the brief's bound at a keyform: quantisation (step <= 1/64 px) and float32 rounding
 BETWEEN_PX = 0.25  # between a morph's keyforms: piecewise linear in the weight (measured: < 0.03 px)
@@ -139,3 +141,26 @@ def test_back_of_the_head_is_dropped_and_the_jaw_keeps_what_it_shows(face, puppe
 def test_random_weights_give_finite_vertices(puppet, weights, head, eyes):
     xy, z = pose(puppet, np.array(weights), head=head, eyes=eyes)
     assert np.isfinite(xy).all() and np.isfinite(z).all()
+
+
+@pytest.mark.parametrize("gouraud", [False, True])
+def test_shade_relights_the_turned_head_as_the_prerender_lights_it(face, gouraud):
+    """The stored rest normals turned by the head and lit (model.shade, what the player does) match lambert on the
+    turned 3D face's own normals within the int8 normals' rounding; at rest they give back the baked colours."""
+    from_face = build(face, fit_camera(face.still(30.0), 256), gouraud=gouraud)
+    assert np.abs(shade(from_face).astype(int) - from_face.colors).max() <= 2
+    head = (math.radians(20), math.radians(-15), 0.2)
+    r = blendshapes.rotations(np.array([head]))[0]
+    turned = (face.base.astype(np.float64) @ r.T)[None].astype(np.float32)
+    if gouraud:
+        normals = unit_vertex_normals(turned, face.faces)[0][from_face.source_vertices]
+        base = face.still(1.0).face_base_colors()[from_face.source_vertices]
+    else:
+        kept = [np.flatnonzero((np.sort(face.faces, 1) == np.sort(from_face.source_vertices[t])).all(1))[0]
+                for t in from_face.triangles]
+        normals = unit_face_normals(turned, face.faces)[0][kept]
+        base = face.still(1.0).triangle_colors()[kept]
+    want = np.rint(lambert(normals, base, from_face.camera.view) * 255)
+    got = shade(from_face, head).astype(int)
+    assert np.abs(got - want).max() <= 3
+    assert np.abs(got - from_face.colors).max() > 10  # the turn changes the light: the rest colours would not do
