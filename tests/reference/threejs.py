@@ -102,15 +102,8 @@ def _fulfil(roots: dict[str, Path], missing: list[str]):
     return handle
 
 
-def threejs_frames(browser, gltf: Path, meta: dict, frames: Sequence[int], clips: Clips = "all",
-                   linear: bool = False, camera: dict | None = None) -> tuple[np.ndarray, dict]:
-    """RGBA uint8 (N, H, W, 4) three.js renders of gltf at our frames (flat Lambert in our light rig), and info.
-
-    camera defaults to meta["camera"]; linear=True writes shaded colours without the sRGB output transform.
-    info holds the three.js revision, every clip's name and the clips played."""
-    cam = camera or meta["camera"]
-    width, height = cam["viewport"]
-    gltf = Path(gltf).resolve()
+def _reference_run(browser, gltf: Path, width: int, height: int, script: str, req: dict) -> dict:
+    """script(req)'s answer in the three.js reference page (tests/reference/player.html) serving gltf's folder."""
     page = browser.new_page(viewport={"width": width, "height": height})
     errors: list[str] = []
     missing_files: list[str] = []
@@ -124,14 +117,27 @@ def threejs_frames(browser, gltf: Path, meta: dict, frames: Sequence[int], clips
             raise RuntimeError(
                 f"the reference page did not start (errors {errors}, not found {missing_files})"
             ) from None
-        req = {"url": f"{ORIGIN}/data/{gltf.name}", "clips": clips if clips == "all" else list(clips),
-               "view": cam["view"], "projection": cam["projection"], "viewport": [width, height],
-               "times": frame_times(meta, frames), "linear": linear}
-        result = page.evaluate("(req) => window.referencePlayer.render(req)", req)
+        result = page.evaluate(script, req)
     finally:
         page.close()
     if errors:
-        raise RuntimeError(f"the reference page failed: {errors}")
+        raise RuntimeError(f"the reference page failed: {errors} (not found {missing_files})")
+    return result
+
+
+def threejs_frames(browser, gltf: Path, meta: dict, frames: Sequence[int], clips: Clips = "all",
+                   linear: bool = False, camera: dict | None = None) -> tuple[np.ndarray, dict]:
+    """RGBA uint8 (N, H, W, 4) three.js renders of gltf at our frames (flat Lambert in our light rig), and info.
+
+    camera defaults to meta["camera"]; linear=True writes shaded colours without the sRGB output transform.
+    info holds the three.js revision, every clip's name and the clips played."""
+    cam = camera or meta["camera"]
+    width, height = cam["viewport"]
+    gltf = Path(gltf).resolve()
+    req = {"url": f"{ORIGIN}/data/{gltf.name}", "clips": clips if clips == "all" else list(clips),
+           "view": cam["view"], "projection": cam["projection"], "viewport": [width, height],
+           "times": frame_times(meta, frames), "linear": linear}
+    result = _reference_run(browser, gltf, width, height, "(req) => window.referencePlayer.render(req)", req)
     raw = [np.frombuffer(base64.b64decode(f), np.uint8).reshape(height, width, 4)[::-1] for f in result["frames"]]
     return np.stack(raw), {"revision": result["revision"], "clips": result["clips"], "played": result["played"]}
 
@@ -338,23 +344,11 @@ def threejs_posed(browser, gltf: Path, camera, pivot: np.ndarray,
     (converter.camera.Camera), and the weight names no mesh of the glTF has."""
     width, height = camera.width, camera.height
     gltf = Path(gltf).resolve()
-    page = browser.new_page(viewport={"width": width, "height": height})
-    errors: list[str] = []
-    missing_files: list[str] = []
-    page.on("pageerror", lambda exc: errors.append(str(exc)))
-    try:
-        page.route(f"{ORIGIN}/**", _fulfil({"ref": HERE, "data": gltf.parent}, missing_files))
-        page.goto(f"{ORIGIN}/ref/player.html")
-        page.wait_for_function("window.referencePlayer !== undefined", timeout=60000)
-        req = {"url": f"{ORIGIN}/data/{gltf.name}", "view": np.asarray(camera.view).tolist(),
-               "projection": np.asarray(camera.projection).tolist(), "viewport": [width, height],
-               "poses": [{"weights": {k: float(v) for k, v in p.weights.items()},
-                          "turn": turn_matrix(pivot, p.head)} for p in poses]}
-        result = page.evaluate(POSE_JS, req)
-    finally:
-        page.close()
-    if errors:
-        raise RuntimeError(f"the reference page failed: {errors} (not found {missing_files})")
+    req = {"url": f"{ORIGIN}/data/{gltf.name}", "view": np.asarray(camera.view).tolist(),
+           "projection": np.asarray(camera.projection).tolist(), "viewport": [width, height],
+           "poses": [{"weights": {k: float(v) for k, v in p.weights.items()},
+                      "turn": turn_matrix(pivot, p.head)} for p in poses]}
+    result = _reference_run(browser, gltf, width, height, POSE_JS, req)
     raw = [np.frombuffer(base64.b64decode(f), np.uint8).reshape(height, width, 4)[::-1] for f in result["frames"]]
     return np.stack(raw), list(result["unknown"])
 
