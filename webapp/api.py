@@ -22,6 +22,7 @@ from webapp.submit import create_job, download_stem
 api = Blueprint("api", __name__)
 log = logging.getLogger("facesvg.webapp")
 REPORT_SUFFIX = ".report.json"
+LIVE_FEED_KIND = "puppet"  # the result file that may open a live WebSocket feed (its Live field, ?live=)
 
 
 def queue():
@@ -208,7 +209,7 @@ def _send(job: Job, kind: str):
         response.headers["Content-Security-Policy"] = ("default-src 'none'; style-src 'unsafe-inline'; img-src data:; "
                                                        "frame-ancestors 'self'")
     elif media == "text/html":  # a generated page (the player): its own inline blocks by hash, no loads
-        response.headers["Content-Security-Policy"] = self_contained_csp(path)
+        response.headers["Content-Security-Policy"] = self_contained_csp(path, websockets=kind == LIVE_FEED_KIND)
     return response
 
 

@@ -18,6 +18,7 @@ from webapp import limits, security
 from webapp.api import api
 from webapp.jobs import make_queue
 from webapp.lease import InstanceLock
+from webapp.live import live
 from webapp.pages import pages
 from webapp.strictjson import StrictJSONProvider
 
@@ -94,6 +95,7 @@ def create_app(config: dict | None = None) -> Flask:
 
     csrf.exempt(api)  # the JSON API takes no cookies-based session; CSRF applies to the HTML forms
     app.register_blueprint(pages)
+    app.register_blueprint(live)
     app.register_blueprint(api, url_prefix="/api/v1")
     _register_errors(app)
     security.install(app)

@@ -23,7 +23,7 @@ from flask import current_app, g, jsonify, render_template, request
 
 from converter.errors import InputError
 
-SUBMIT_ENDPOINTS = ("api.post_job", "pages.submit")
+SUBMIT_ENDPOINTS = ("api.post_job", "pages.submit", "live.sample")  # live.sample: the sample's puppet
 FORM_SLACK = 1 << 20  # room for the option fields and multipart framing beside the largest upload
 DRAIN_CHUNK = 1 << 16
 

@@ -45,17 +45,18 @@ def _static_page_csp(path: str, mtime: float) -> str:
 
 
 @functools.lru_cache(maxsize=16)
-def _self_contained_csp(path: str, mtime: float) -> str:
+def _self_contained_csp(path: str, mtime: float, connect: str) -> str:
     """The CSP of a generated self-contained page (the player): only its own inline blocks, no loads at all."""
     hashes = {tag: sources or "'none'" for tag, sources in _inline_hashes(path).items()}
     return (f"default-src 'none'; script-src {hashes['script']}; style-src {hashes['style']}; "
-            "img-src data: blob:; connect-src 'none'; "
+            f"img-src data: blob:; connect-src {connect}; "
             "object-src 'none'; frame-ancestors 'self'; form-action 'none'; base-uri 'none'")
 
 
-def self_contained_csp(path: Path) -> str:
-    """The CSP for a generated HTML result file (recomputed when the file changes)."""
-    return _self_contained_csp(str(path), path.stat().st_mtime)
+def self_contained_csp(path: Path, websockets: bool = False) -> str:
+    """The CSP for a generated HTML result file (recomputed when the file changes); websockets: it may open the
+    WebSocket feed its user names (the puppet's Live field), and nothing else."""
+    return _self_contained_csp(str(path), path.stat().st_mtime, "ws: wss:" if websockets else "'none'")
 
 
 def static_page_csp(filename: str) -> str:
