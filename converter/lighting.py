@@ -1,4 +1,4 @@
-"""The one lighting model shared by the prerender, flat shading and Gouraud shading, and the sRGB transfer curve.
+"""The one lighting model shared by the prerender, flat shading and Gouraud shading.
 
 Colours in a FaceAnimation are display (sRGB-encoded) values (see converter/animation.py); light adds up in
 linear light, so lambert decodes the base colour, lights it and encodes the result once, as a glTF viewer does.
@@ -9,6 +9,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+
+from converter.srgb import encode_clipped, linear_to_srgb, srgb_to_linear  # noqa: F401  (re-exported)
 
 
 class Lighting(NamedTuple):
@@ -27,32 +29,6 @@ def light_direction_world(view: np.ndarray, lighting: Lighting = DEFAULT_LIGHTIN
     d = np.asarray(lighting.direction_eye, np.float64)
     d = d / np.linalg.norm(d)
     return view[:3, :3].T @ d
-
-
-def srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    """sRGB-encoded values 0..1 to linear light (IEC 61966-2-1 piecewise curve), float32."""
-    c = np.clip(np.asarray(c, np.float32), 0.0, 1.0)
-    f = np.float32
-    return np.where(c <= 0.04045, c / f(12.92), ((c + f(0.055)) / f(1.055)) ** f(2.4)).astype(np.float32)
-
-
-def linear_to_srgb(c: np.ndarray) -> np.ndarray:
-    """Linear light 0..1 to sRGB-encoded values (IEC 61966-2-1 piecewise curve), float32."""
-    return _encode(np.clip(np.asarray(c, np.float32), 0.0, 1.0))
-
-
-def _encode(c: np.ndarray) -> np.ndarray:
-    """linear_to_srgb of float32 c already within 0..1 (NaN passes through), with no temporary but the result:
-    shading a 4,000-frame capture of the ICT head encodes 612 M values, where np.where's two full branches cost a
-    third more CPU than the power alone."""
-    f = np.float32
-    c = np.asarray(c)
-    out = np.power(c, f(1 / 2.4), out=np.empty(c.shape, np.float32))
-    out *= f(1.055)
-    out -= f(0.055)
-    np.multiply(c, f(12.92), out=out, where=c <= f(0.0031308))
-    np.copyto(out, f(1.0), where=c >= 1.0)  # float32 rounding must not dim white
-    return out
 
 
 def lambert(
@@ -78,4 +54,4 @@ def lambert_linear(
     gain *= lighting.diffuse
     gain += lighting.ambient
     lit = linear_rgb * gain[..., None]
-    return _encode(np.clip(lit, 0.0, 1.0, out=lit))
+    return encode_clipped(np.clip(lit, 0.0, 1.0, out=lit))

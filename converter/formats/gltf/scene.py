@@ -29,7 +29,7 @@ from converter.formats.gltf.skin import check_joint_indices, influences, joint_m
 from converter.formats.gltf.textures import decode_image, sample_texture
 from converter.formats.gltf.vrm import read_expressions
 from converter.formats.parts import part_name
-from converter.lighting import linear_to_srgb
+from converter.srgb import linear_to_srgb
 
 DEFAULT_FPS = 30.0
 MAX_FRAMES = 100_000

@@ -13,7 +13,7 @@ import warnings
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
-from converter.lighting import srgb_to_linear
+from converter.srgb import srgb_to_linear
 
 MAX_TEXTURE_PIXELS = 1 << 26  # a 8192 x 8192 texture; larger ones are not decoded
 # glTF sampler wrap modes -> scipy.ndimage boundary modes (REPEAT is the default).
