@@ -14,7 +14,9 @@ blendshapes.drive does (eyes about their fitted sphere centres first, then the h
 bounding box, R = Ry Rx Rz), and projects them again. That is exact at every angle and costs no table; sampled
 angle keyforms (Live2D's AngleX/AngleY, bilinear, a 7 x 7 grid every 10 degrees) were 80 % of the package and
 1 px off between keyforms. The mesh holds every triangle front-facing at rest, under any single target at its
-keyforms, or at any angle of VISIBILITY_GRID: a turn beyond it may show a triangle the puppet lacks.
+keyforms, or at any angle of VISIBILITY_GRID: a turn beyond it may show a triangle the puppet lacks. By default
+(build's budget) it then keeps only those some sampled pose shows, simplified within a pixel bound where there are
+more than the player draws at the display rate (converter/puppet/budget.py).
 
 Colour: the puppet keeps each triangle's (flat) or vertex's (Gouraud) rest normal (octahedral, 2 x int8) and unlit
 base colour, and the player lights them as converter.lighting does with the normals turned by the head (`shade`), so
@@ -33,6 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+import converter.puppet.budget as triangle_budget
 from converter.blendshapes import eye_vertices, match_face, normalise, rotations
 from converter.camera import Camera
 from converter.errors import InputError
@@ -202,8 +205,10 @@ def _turned(points: np.ndarray, centre: np.ndarray, yaws: np.ndarray, pitches: n
     return (points.astype(np.float32) - c) @ np.swapaxes(r, 1, 2) + c
 
 
-def build(face: MorphFace, camera: Camera, gouraud: bool = False, progress: Progress = no_progress) -> Puppet:
-    """The puppet of a face seen by a camera (see the module docstring); progress("puppet", fraction)."""
+def build(face: MorphFace, camera: Camera, gouraud: bool = False, progress: Progress = no_progress,
+          budget: bool = True) -> Puppet:
+    """The puppet of a face seen by a camera (see the module docstring); progress("puppet", fraction). With budget
+    (the default) only the triangles some sampled pose shows are kept, simplified within budget.BOUND_PX."""
     base = face.base.astype(np.float32)
     faces = face.faces.astype(np.int64)
     xy0, z0 = _project(camera, base)
@@ -264,13 +269,25 @@ def build(face: MorphFace, camera: Camera, gouraud: bool = False, progress: Prog
         see_part(ids, exy, ez)
     progress("puppet", 0.7)
 
-    kept = np.flatnonzero(shown)
-    if not len(kept):
+    if not shown.any():
         raise InputError("no triangle of the face is ever visible from this camera (all face away, lie outside the "
                          "view or have no area); check --yaw/--pitch or the mesh's winding.")
+    facing = int(shown.sum())
+    if budget:  # only what some pose shows, simplified within budget.BOUND_PX (see converter/puppet/budget.py)
+        shown &= triangle_budget.seen(face, camera, pivot3, shown)
+        occluded = facing - int(shown.sum())
+        mesh, mesh_parts = triangle_budget.simplified(face, camera, shown) if shown.any() else (
+            faces[shown], face.part_ids[shown])
+    else:
+        occluded, mesh, mesh_parts = 0, faces[shown], face.part_ids[shown]
+    if not len(mesh):
+        raise InputError("no triangle of the face is ever visible from this camera (all hidden behind others); "
+                         "check --yaw/--pitch or the mesh's winding.")
+    mesh = mesh.astype(np.int64)
     # in order of their vertices (the package stores the corners as differences: nearby ids deflate well)
-    kept = kept[np.lexsort((faces[kept].max(axis=1), faces[kept].min(axis=1)))]
-    used = np.unique(faces[kept])
+    order = np.lexsort((mesh.max(axis=1), mesh.min(axis=1)))
+    mesh, mesh_parts = mesh[order], mesh_parts[order]
+    used = np.unique(mesh)
     remap = np.full(len(base), -1, np.int64)
     remap[used] = np.arange(len(used))
 
@@ -286,26 +303,29 @@ def build(face: MorphFace, camera: Camera, gouraud: bool = False, progress: Prog
     eyes = tuple(remap[ids][remap[ids] >= 0].astype(np.int32) for ids in sides or ())
     progress("puppet", 0.8)
 
-    tris = remap[faces[kept]].astype(np.int32)
+    tris = remap[mesh].astype(np.int32)
     neutral = base[None]
-    if gouraud:
+    if gouraud:  # the full mesh's vertex normals: the simplified surface keeps the face's smooth shading
         base_display = face.still(1.0).face_base_colors()
         base_rgb = srgb_to_linear(base_display[None])
         rest_normals = unit_vertex_normals(neutral, faces)
         rgb = lambert_linear(rest_normals, base_rgb, camera.view, DEFAULT_LIGHTING)[0][used]
         rest_normals, base_display = rest_normals[0][used], base_display[used]
     else:
-        base_display = face.still(1.0).triangle_colors()[kept]
+        still = face.still(1.0)
+        on_mesh = still.with_frames(still.frames, faces=mesh.astype(np.int32), part_ids=mesh_parts)
+        base_display = on_mesh.triangle_colors()
         tri_lin = srgb_to_linear(base_display[None])
-        rest_normals = unit_face_normals(neutral, faces)
-        rgb = lambert_linear(rest_normals, tri_lin, camera.view, DEFAULT_LIGHTING, rows=kept)[0]
-        rest_normals = rest_normals[0][kept]
+        rest_normals = unit_face_normals(neutral, mesh)
+        rgb = lambert_linear(rest_normals, tri_lin, camera.view, DEFAULT_LIGHTING)[0]
+        rest_normals = rest_normals[0]
     colors = np.clip(np.rint(rgb * 255), 0, 255).astype(np.uint8)
     normals8 = octahedral(np.nan_to_num(rest_normals))
     base8 = np.clip(np.rint(np.nan_to_num(base_display) * 255), 0, 255).astype(np.uint8)
     aliases = _aliases(face)
-    info = {"vertices": int(len(used)), "triangles": int(len(kept)), "source_vertices": int(len(base)),
-            "source_triangles": int(len(faces)), "morphs": n_k,
+    info = {"vertices": int(len(used)), "triangles": int(len(mesh)), "source_vertices": int(len(base)),
+            "source_triangles": int(len(faces)), "morphs": n_k, "facing_triangles": facing,
+            "occluded_triangles": occluded, "budget_px": triangle_budget.BOUND_PX if budget else 0.0,
             "morph_intervals": int(sum(len(p.axes[0]) - 1 for p in morphs)),
             "eyes": int(bool(eyes))}
     progress("puppet", 1.0)

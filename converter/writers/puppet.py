@@ -17,8 +17,10 @@ The page carries three blocks and the inlined script (converter/writers/puppet.j
   swaps it for another without touching the rest (`facesvg puppet-take`).
 
 The script draws with WebGL (depth-tested triangles, positions summed in JS each frame; WebGL2 uploads them as a
-float texture the vertex shader reads) or, without WebGL, with canvas 2D (back faces dropped, triangles in depth
-order). It evaluates no strings and fetches nothing; the only connection it opens is the WebSocket a user names
+float texture the vertex shader reads) or, without WebGL, rasterises them itself as GL would (pixel centres, a depth
+buffer, back faces dropped) into an image it puts on a canvas 2D in one call (a path and a fill per triangle cost
+far more: bench_puppet). It refuses a package whose format or version it does not know (VERSION), with a message
+saying so. It evaluates no strings and fetches nothing; the only connection it opens is the WebSocket a user names
 (`?live=ws://...` or the Live field).
 """
 

@@ -273,3 +273,23 @@ def test_the_player_relights_the_turned_head(browser, tmp_path, face, renderer):
     close = np.abs(got - want[picks]).max(axis=1) <= 3  # a centre may fall on a nearer triangle: most must match
     assert close.mean() >= 0.75, (got, want[picks])
     assert (np.abs(got - rest[picks]).max(axis=1) > 3).mean() >= 0.75
+
+
+@pytest.mark.browser
+@pytest.mark.parametrize("version", [writer.VERSION + 1, 2])
+def test_the_player_refuses_a_format_it_does_not_know(browser, tmp_path, puppet, version):
+    """A package of another format version is refused with a clear message, not drawn wrong."""
+    data = writer.write(puppet, ConversionOptions(), Report())
+    meta = f'"version":{writer.VERSION}'.encode()
+    assert data.count(meta) == 1
+    path = tmp_path / "puppet.html"
+    path.write_bytes(data.replace(meta, f'"version":{version}'.encode()))
+    page = browser.new_page()
+    try:
+        page.goto(path.as_uri() + "?paused")
+        page.wait_for_function("() => document.documentElement.dataset.puppet", timeout=60000)
+        assert page.evaluate("() => document.documentElement.dataset.puppet") == "failed"
+        status = page.evaluate("() => document.getElementById('puppet-status').textContent")
+        assert f"format facesvg-puppet {version}" in status and "does not know" in status
+    finally:
+        page.close()
