@@ -67,6 +67,8 @@ SIMPLIFY_BOUND = SimplifyBound(mean_px=0.5, max_px=5.0, coverage_kept=0.9, slack
 # Presets whose max_triangles is a cap, not a count: the fewest triangles that keep SIMPLIFY_BOUND, at most the cap
 # (a max_triangles given with the preset is the cap; without such a preset it is the count).
 BOUNDED_PRESETS = frozenset({"mobile"})
+EXACT_FROM = 8.0  # the default colour tolerance, which --exact replaces
+EXACT_LEVELS = 3.0  # --exact's: each triangle's own held steps within 3 levels (the exact shading, as rounded)
 
 Progress = Callable[[str, float], None]
 """Progress callback: (stage name, fraction of the whole job done, 0..1)."""
@@ -212,16 +214,19 @@ class ConversionOptions:
                              unset="the last frame", advanced=True)
     tolerance: float = option(0.25, "largest vertex deviation in output pixels the encoder may add",
                               label="Tolerance (px)", minimum=0, exclusive_minimum=True, maximum=50, unit="px")
-    color_tolerance: float = option(3.0, "largest colour deviation (8-bit levels per channel) of the flat SVG; a "
-                                    "triangle whose shade stays within it gets one static colour. Animated colours "
-                                    "cost players most (bench_playback): the default 3 animates the exact shading, "
-                                    "255 keeps every colour static (the mobile preset)",
+    color_tolerance: float = option(8.0, "largest colour deviation (8-bit levels per channel) of the flat SVG: "
+                                    "triangles whose shades stay within it of each other at every frame share one "
+                                    "animated colour (and, in one group, one path); 255 keeps every colour static "
+                                    "(the mobile preset); with --exact each triangle's own colour steps keep to it",
                                     label="Colour tolerance (levels)", minimum=0.6, maximum=255, advanced=True)
+    exact: bool = option(False, "one path per triangle, each with its own colour steps within 3 levels (unless "
+                         "--color-tolerance says otherwise): the exact shading, the largest file and the slowest "
+                         "to play", label="Exact: one path per triangle", advanced=True)
     max_animations: int | None = option(None, "at most this many animated elements in the flat SVG: paths of one "
-                                        "static colour in one group are merged into one path of several "
-                                        "triangles, keyed together (more bytes, far cheaper playback)",
+                                        "colour in one group are merged into one path of several triangles, keyed "
+                                        "together (more bytes, far cheaper playback)",
                                         label="Animated element budget", minimum=1,
-                                        unset="one path per triangle", advanced=True)
+                                        unset="paths of one shared colour in one group merged", advanced=True)
     raw: bool = option(False, "write every frame, no keyframe reduction (the chapter's unoptimised encoding)",
                        label="Every frame, no keyframe reduction", advanced=True)
     max_triangles: int | None = option(None, "triangle budget (simplify once, shared by every frame)",
@@ -259,6 +264,8 @@ class ConversionOptions:
             for name, value in PRESETS[self.preset].values.items():
                 if getattr(self, name) == defaults[name]:
                     object.__setattr__(self, name, value)
+        if self.exact and self.color_tolerance == EXACT_FROM:  # the exact shading, unless a tolerance is given
+            object.__setattr__(self, "color_tolerance", EXACT_LEVELS)
         for spec in option_fields():
             value = getattr(self, spec.name)
             if value is not None:

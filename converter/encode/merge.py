@@ -112,23 +112,30 @@ def _z_order(xy: np.ndarray) -> np.ndarray:
     return code
 
 
-def plan(segment: np.ndarray, rgb: np.ndarray, active: np.ndarray, tolerance: float, xy_paths: np.ndarray,
-         max_elements: int) -> Merge:
+def plan(segment: np.ndarray, rgb: np.ndarray | None, active: np.ndarray, tolerance: float, xy_paths: np.ndarray,
+         max_elements: int, entries: np.ndarray | None = None, max_size: int | None = None) -> Merge:
     """Merge sets for paths (document order) in groups segment (P,), with shades rgb (T, P, 3) within colour
     tolerance levels, drawn at xy_paths (T, P, 3, 2) where active (T, P): the largest palette, then the
     smallest sets, that leave at most max_elements elements (the smallest palette and largest sets tried when
-    none does)."""
+    none does). With entries (P,), each path's animated palette entry (converter.encode.palette) is its colour
+    instead: paths of one entry merge (levels then holds the entry in its first column, -1 in the others).
+    max_size: the largest set tried (default: every size in SIZES)."""
+    sizes = [s for s in SIZES if max_size is None or s <= max_size] or [1]
     p = len(segment)
     sign = winding(xy_paths, active)
     # Interiors that overlap keep their order; neighbours that only touch may swap (their seam strokes do).
     pairs = overlap_pairs(xy_paths, active, margin=-OVERLAP_MARGIN_PX) if p > 1 else np.zeros((0, 2), np.int64)
-    for colours in PALETTES:
-        levels, code = colour_codes(rgb, active, tolerance, colours)
+    for colours in PALETTES if entries is None else (0,):
+        if entries is None:
+            levels, code = colour_codes(rgb, active, tolerance, colours)
+        else:
+            code = np.asarray(entries, np.int64)
+            levels = np.stack([code, np.full(p, -1), np.full(p, -1)], axis=1)
         key = np.where((code >= 0) & (sign != 0), code * 2 + (sign > 0), -1)
         key = np.where(key >= 0, key, -1 - np.arange(p))  # an unmergeable path is a key of its own
         order, runs = _sets(segment, key, pairs)
         lengths = np.diff(runs)
-        for size in SIZES:
+        for size in sizes:
             if int((-(-lengths // size)).sum()) <= max_elements:
                 break
         if int((-(-lengths // size)).sum()) <= max_elements:

@@ -1,4 +1,4 @@
-"""Held colour steps, compiled: the greedy behind ``svg_anim.color_steps`` and the colour error it plays.
+"""Held colour steps, compiled: the greedy behind ``colours.color_steps`` and the colour error it plays.
 
 Each path's frames are sequential (a step ends where a frame no longer fits the colour held), so both loops run
 in numba, frame by frame with each path's state held, over the Sheet's colours as stored (float32 (T, N, 3) in

@@ -11,7 +11,7 @@ compact binary block and plays it with a small script (converter/writers/player.
   applied once when the player expands the keys), their radius divided by its largest magnification;
 - per path (the SVG's drawing order, converter.encode.order.draw_list) its triangle's vertices and its
   visibility as change frames;
-- colours as linear keys within COLOR_LEVELS levels (svg_anim.color_keys; the SVG holds discrete steps instead,
+- colours as linear keys within COLOR_LEVELS levels (encode.colours.color_keys; the SVG holds discrete steps instead,
   which Chromium's SMIL plays faster, while interpolating costs WebGL nothing): per path for flat shading, per
   vertex for Gouraud (WebGL interpolates vertex colours linearly: exact Gouraud).
 
@@ -42,14 +42,13 @@ from importlib import resources
 import numpy as np
 from scipy import sparse
 
-from converter.encode import freeknots, groups, robust_affine
+from converter.encode import colours, freeknots, groups, robust_affine
 from converter.encode import keys as keyframes
 from converter.encode.budget import ErrorBudget
 from converter.encode.order import draw_list
 from converter.errors import InputError
 from converter.options import ConversionOptions, Progress, Report, no_progress, span
 from converter.sheet import Sheet
-from converter.writers import svg_anim
 from converter.writers.metadata import source_fields
 
 MAGIC = b"FSVP"
@@ -128,9 +127,9 @@ def _vertex_active(active: np.ndarray, path_vertices: np.ndarray, n_vertices: in
 
 
 def _color_keys(rgb: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Colour tracks (T, N, 3) 0..1 as linear keys within COLOR_LEVELS levels (svg_anim.color_keys, its bound
+    """Colour tracks (T, N, 3) 0..1 as linear keys within COLOR_LEVELS levels (colours.color_keys, its bound
     kept where keys fall outside 0..255), packed."""
-    ck = svg_anim.color_keys(rgb, active, COLOR_LEVELS)
+    ck = colours.color_keys(rgb, active, COLOR_LEVELS)
     return _pack_keys(ck.mask, ck.values)
 
 

@@ -37,8 +37,9 @@ from converter import heap, playcost
 from converter.arrays import lengths, lexsort_ints
 from converter.encode import collapse, freeknots, groups, merge
 from converter.encode import keys as keyframes
-from converter.encode import steps as held
+from converter.encode import palette as shared_colours
 from converter.encode.budget import ErrorBudget, viewbox_scale
+from converter.encode.colours import color_error, color_steps
 from converter.encode.order import draw_list
 from converter.encode.tracks import Tracks, blocks
 from converter.errors import InputError
@@ -55,7 +56,10 @@ FORMAT_VERSION = 2
 # side strokes a shared edge, so it is wider than the 0.5 px both sides drew when every edge was stroked: the egg
 # of tests/writers/test_seams.py shows less page through its seams than then, and outlines do not grow.
 STROKE_PX = 0.6
-COLOR_TIME_LEVELS = 0.1  # of which rounding the colour keyTimes may take
+STATIC_LEVELS = 255.0  # a colour tolerance this wide keeps every colour static: no animated palette
+SHARED_SET_SIZE = 8  # most triangles in one path of one shared colour by default: larger sets save few elements
+# more and cost bytes, since a set's subpaths are keyed together (bench_default_playback)
+SHARED_REFERENCE = "gradient"  # how a path refers to its animated palette entry: "gradient", "css" or "own"
 BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime): what groups weigh
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
 UNIFORM_VALUES = 1 << 23  # float64 track values fitted at once (64 MB: 4,000 frames x 349 paths)
@@ -271,78 +275,6 @@ def _raw_texts(tri_xy: np.ndarray, closed: np.ndarray) -> list[str]:
     return out.tolist()
 
 
-def color_keys(rgb: np.ndarray, active: np.ndarray, tolerance: float) -> keyframes.Keys:
-    """Colour (T, P, 3) in 0..1 as linear keys within tolerance 8-bit levels per channel where shown (values
-    rounded to integer levels, which the tolerance includes; uint8). A path whose shown colours all lie within
-    the tolerance of their mid-range is one static colour (two equal keys). Worked out a block of paths at a
-    time (each path's keys are its own), so only the keys take memory for every path."""
-    t, p = active.shape
-    mask = np.zeros((t + 1, p), bool)
-    values = np.zeros((t + 1, p, 3), np.uint8)
-    size = freeknots.block_tracks(t)
-    for a in range(0, p, size):
-        sl = slice(a, a + size)
-        mask[:, sl], values[:, sl] = _color_block(np.asarray(rgb[:, sl], np.float64) * 255, active[:, sl], tolerance)
-    return keyframes.Keys(mask, values, np.where(active.any(axis=0), np.argmax(active, axis=0), -1))
-
-
-def _color_block(levels: np.ndarray, active: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
-    """color_keys' mask (T+1, N) and values (T+1, N, 3) for colour levels (T, N, 3) in 0..255."""
-    t, p = active.shape
-    shown = active[..., None]
-    lo = levels.min(axis=0, where=shown, initial=np.inf)
-    hi = levels.max(axis=0, where=shown, initial=-np.inf)
-    flat = ((hi - lo).max(axis=-1, initial=0.0) / 2 + 0.5 <= tolerance) & active.any(axis=0)
-    mask = np.zeros((t + 1, p), bool)
-    values = np.zeros((t + 1, p, 3))
-    mask[[0, t]] = flat
-    values[[0, t]] = np.where(flat[:, None], np.rint((lo + hi) / 2), 0.0)
-    rest = np.flatnonzero(~flat)
-    if len(rest):
-        eps = max(tolerance - 0.5 - COLOR_TIME_LEVELS, 1e-6)  # rounding, keyTimes
-        keys = freeknots.reduce_free(np.take(levels, rest, axis=1), np.take(active, rest, axis=1), eps)
-        mask[:, rest] = keys.mask
-        values[:, rest] = np.rint(keys.values)
-        # A free key may lie outside 0..255 (extrapolated across hidden frames), where clipping would move the
-        # shown frames of its segment: those paths take keys on sampled values, or else every frame.
-        for fallback in (lambda c: keyframes.reduce(levels[:, c], active[:, c], eps), None):
-            clipped = np.flatnonzero((mask[..., None] & ((values < 0) | (values > 255))).any(axis=(0, 2)))
-            if not len(clipped):
-                break
-            if fallback is None:
-                mask[:, clipped] = True
-                values[:t, clipped] = np.rint(levels[:, clipped])
-                values[t, clipped] = values[t - 1, clipped]
-            else:
-                keys = fallback(clipped)
-                mask[:, clipped], values[:, clipped] = keys.mask, np.rint(keys.values)
-    return mask, np.clip(values, 0, 255).astype(np.uint8)
-
-
-def color_steps(rgb: np.ndarray, active: np.ndarray, tolerance: float,
-                paths: np.ndarray | None = None) -> keyframes.Keys:
-    """Colour (T, P, 3) in 0..1 (or its columns paths of a wider (T, N, 3)) as steps for a discrete animation:
-    per path the fewest held colours (integer levels, uint8) within tolerance levels per channel of every shown
-    frame, each held from its first frame (a key; frame 0 always is one, hidden frames take whatever is held).
-    Greedy, which is optimal for a max-norm bound on a piecewise-constant fit. A path with one key is one static
-    colour.
-
-    Why steps and not linear keys: Chromium re-evaluates an interpolated colour animation far more slowly than a
-    discrete one (bench_playback: the sample's exact-colour file played 3x faster with the same values held), and
-    the steps need about as many keys as the linear greedy within the same tolerance."""
-    p = active.shape[1]
-    mask, values = held.hold(rgb, np.arange(p) if paths is None else paths, active, tolerance)
-    return keyframes.Keys(mask, values, np.where(active.any(axis=0), np.argmax(active, axis=0), -1))
-
-
-def color_error(rgb: np.ndarray, active: np.ndarray, steps: keyframes.Keys,
-                paths: np.ndarray | None = None) -> np.ndarray:
-    """Per shown (frame, path) the largest channel error in levels (float32) of the played colour (color_steps'
-    held values) against the exact shade rgb (T, P, 3) in 0..1 (or its columns paths), path by path."""
-    p = active.shape[1]
-    return held.played_error(rgb, np.arange(p) if paths is None else paths, active, steps.mask, steps.values)
-
-
 def _discrete(attribute: str, codes: np.ndarray, names: list[str], kt: list[str], dur: str) -> list[str]:
     """Per path a discrete <animate> of codes (T, P) at their change points ('' when constant)."""
     t, p = codes.shape
@@ -376,7 +308,8 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     if mode == "bounded":  # the raw file's d values alone, counted exactly (writing them would cost more)
         report.sizes["raw_d_values"] = raw_values_bytes(sheet.xy, sheet.faces[tris])
     budget = ErrorBudget.split(options.tolerance, max(sheet.camera.width, sheet.camera.height))
-    merging = mode == "bounded" and options.max_animations is not None and p > options.max_animations
+    sharing = mode == "bounded" and not options.exact and options.color_tolerance < STATIC_LEVELS and p > 0
+    merging = mode == "bounded" and (sharing or (options.max_animations is not None and p > options.max_animations))
     st = strokes(sheet, tris, active)
     faces = st.faces  # each path's corners from the one its d starts at
     plan = None
@@ -394,8 +327,14 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     if plan is None:  # the Sheet's float32 vertices, read a block of paths at a time
         track = Tracks.screen(sheet.xy, faces[tris])
     joined = None
+    shared = None  # the animated palette every path refers to (converter.encode.palette), unless exact
+    if sharing:
+        shared = shared_colours.build(sheet.face_rgb, sheet.color_columns(tris), active, options.color_tolerance)
     if merging:
-        joined, tris, active, track, plan = _merge_plan(sheet, faces, tris, active, track, plan, options)
+        joined, tris, active, track, plan = _merge_plan(sheet, faces, tris, active, track, plan, options,
+                                                        None if shared is None else shared.entry)
+        if shared is not None:
+            shared = shared._replace(entry=shared.entry[joined.order])
         track = _stroke_merged(st, joined, tris, track)
     if mode in ("raw", "chapter"):
         body = _encode_raw(sheet, tris, active, track, dur, chapter=mode == "chapter", strokes=st,
@@ -407,7 +346,8 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
         if plan is not None:  # its keys live on only in the timeline, its track in owned
             plan = plan._replace(timeline=None, track=None)
         body, scale, enc = _encode_keyed(sheet, budget, tris, active, owned, dur, report, st, plan,
-                                         options.color_tolerance, joined, span(progress, KEYS_DONE, 1.0, "text"))
+                                         options.color_tolerance, joined, span(progress, KEYS_DONE, 1.0, "text"),
+                                         shared)
         extra["encoding"].update(enc)
     head = [_header(sheet, scale), metadata(sheet, options, report, extra, order=tris),
             f"<title>{escape(sheet.name)}</title>"]
@@ -425,16 +365,18 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
 
 
 def _merge_plan(sheet: Sheet, faces: np.ndarray, tris: np.ndarray, active: np.ndarray, track: Tracks,
-                plan: groups.Plan | None, options: ConversionOptions):
-    """converter.encode.merge's sets for the paths (triangles tris of faces), and the paths, their tracks and the
-    plan in its order."""
+                plan: groups.Plan | None, options: ConversionOptions, entries: np.ndarray | None = None):
+    """converter.encode.merge's sets for the paths (triangles tris of faces; by palette entry where entries),
+    and the paths, their tracks and the plan in its order."""
     segment = np.zeros(len(tris), np.int64)
     if plan is not None:  # a set never crosses the edge of a group
         edge = np.zeros(len(tris) + 1, np.int64)
         edge[plan.groups.ravel()] = 1
         segment = np.cumsum(edge[:-1])
-    joined = merge.plan(segment, sheet.face_colors(tris), active, options.color_tolerance,
-                        np.take(sheet.xy, faces[tris], axis=1), options.max_animations)
+    joined = merge.plan(segment, None if entries is not None else sheet.face_colors(tris), active,
+                        options.color_tolerance, np.take(sheet.xy, faces[tris], axis=1),
+                        options.max_animations or 0, entries,
+                        SHARED_SET_SIZE if entries is not None and options.max_animations is None else None)
     o = joined.order
     if plan is not None:
         plan = plan._replace(track=plan.track.reorder(o), radius=plan.radius[o], band=plan.band[o],
@@ -457,6 +399,39 @@ def _stroke_merged(st: Strokes, joined: merge.Merge, tris: np.ndarray, track: Tr
     corners = np.array(track.corners)
     corners[fix] = np.take_along_axis(corners[fix], (turn[:, None] + np.arange(3)) % 3, axis=1)
     return Tracks(track.verts, corners)
+
+
+def _shared_colours(shared: shared_colours.Palette, t: int, dur: str, decimals: int) -> tuple[str, str, dict[int, str]]:
+    """The animated entries of a shared palette as SHARED_REFERENCE says: the <defs> (one-stop gradients whose
+    stop colour animates; '' for CSS), the CSS rules (a class per entry: its fill and stroke paint, or its
+    keyframes) and each animated entry's class name, numbered by first use."""
+    live = np.flatnonzero(shared.animated())
+    used = np.zeros(shared.size, bool)
+    used[shared.entry[shared.entry >= 0]] = True
+    live = live[used[live]]
+    names = {int(k): f"p{i}" for i, k in enumerate(live.tolist())}
+    mask = shared.mask[:, live]
+    epk, efk = np.nonzero(mask.T)
+    hexes = _hex(shared.values[:, live].transpose(1, 0, 2)[epk, efk]).tolist()
+    bounds = np.searchsorted(epk, np.arange(len(live) + 1)).tolist()
+    defs, rules = [], []
+    if SHARED_REFERENCE == "gradient":
+        kt = key_times(efk, t, decimals, "early")
+        for i in range(len(live)):
+            a, b = bounds[i], bounds[i + 1]
+            defs.append(f'<linearGradient id="p{i}" gradientUnits="userSpaceOnUse"><stop stop-color="{hexes[a]}">'
+                        f'<animate attributeName="stop-color" calcMode="discrete" dur="{dur}" '
+                        f'repeatCount="indefinite" keyTimes="{";".join(kt[a:b])}" values="{";".join(hexes[a:b])}"/>'
+                        "</stop></linearGradient>")
+            rules.append(f".p{i}{{fill:url(#p{i});stroke:url(#p{i})}}")
+        return "<defs>" + "".join(defs) + "</defs>", "".join(rules), names
+    q = 10 ** decimals  # CSS keyframes, held (step-end): the SMIL keyTimes' grid, in percent
+    pct = svgtext.numbers(np.rint(np.maximum(efk - 0.5, 0.0) * q / t) * (100 / q), max(decimals - 2, 0))
+    for i in range(len(live)):
+        a, b = bounds[i], bounds[i + 1]
+        frames = "".join(f"{pct[j]}%{{color:{hexes[j]}}}" for j in range(a, b))
+        rules.append(f".p{i}{{color:{hexes[a]};animation:k{i} {dur} step-end infinite}}@keyframes k{i}{{{frames}}}")
+    return "", "".join(rules), names
 
 
 def _merged_geometry(track: Tracks, active: np.ndarray, radius: np.ndarray, gain: np.ndarray,
@@ -806,12 +781,14 @@ def _d_animations(tl: collapse.Timeline, p: int, t: int, gain: np.ndarray | None
 def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: np.ndarray, owned: list,
                   dur: str, report: Report, st: Strokes, plan: groups.Plan | None = None,
                   color_tolerance: float = 3.0, joined: merge.Merge | None = None,
-                  progress: Progress = no_progress) -> tuple[list[str], int, dict]:
+                  progress: Progress = no_progress, shared: shared_colours.Palette | None = None
+                  ) -> tuple[list[str], int, dict]:
     """The error-bounded integer encoding (module docstring) of the paths' tracks (encode.tracks) and their keys
     (collapse.Timeline) within budget, handed over as owned = [track, timeline] (emptied here, so that each is
     freed as soon as it is used: on a long capture they are the largest arrays); st: their seam strokes; plan:
     rigid groups (local tracks); colours within color_tolerance levels; joined: paths drawn as one element
-    (converter.encode.merge)."""
+    (converter.encode.merge); shared: the animated palette whose entries the paths play (else each path's own
+    held steps)."""
     track, tl = owned
     owned.clear()
     t, p = active.shape
@@ -850,9 +827,13 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     del track
     # Colour: held steps within the colour tolerance (color_steps); the first step's colour is the path's class.
     columns = sheet.color_columns(tris)
-    ckeys = color_steps(sheet.face_rgb, active, color_tol, columns)  # as stored: no (T, P, 3) copy
+    if shared is not None:  # every path plays its palette entry's steps
+        ckeys = keyframes.Keys(shared.mask[:, shared.entry], shared.values[:, shared.entry],
+                               np.where(active.any(axis=0), np.argmax(active, axis=0), -1))
+    else:
+        ckeys = color_steps(sheet.face_rgb, active, color_tol, columns)  # as stored: no (T, P, 3) copy
     progress("text", 0.8)
-    if sets:  # a merged path's one static colour (its code's)
+    if sets and shared is None:  # a merged path's one static colour (its code's)
         ckeys.mask[:, inside] = False
         ckeys.mask[0, inside] = True
         ckeys.values[0, inside] = joined.levels[inside]
@@ -875,7 +856,18 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     pal = values[rank]
     palette = np.stack([(pal >> 16) & 255, (pal >> 8) & 255, pal & 255], axis=1)
     bare = st.bare(tris)
-    out = [_style(palette, view_scale, bool(bare.any())), group_open(plan.head, t, dur) if plan is not None else "<g>"]
+    style = _style(palette, view_scale, bool(bare.any()))
+    names = [f"c{c}" for c in cls.tolist()]
+    defs = ""
+    if shared is not None and SHARED_REFERENCE != "own":  # each animated entry animates once; its paths refer
+        defs, rules, entry_names = _shared_colours(shared, t, dur, c_dec)
+        for j in np.flatnonzero(c_vary).tolist():
+            names[j], c_anims[j] = entry_names[shared.entry[j]], ""
+        style = style.replace("</style>", rules + "</style>")
+        report.counts["shared_color_animations"] = len(entry_names)
+    if shared is not None:
+        report.counts["palette_entries"] = shared.size
+    out = [style, *([defs] if defs else []), group_open(plan.head, t, dur) if plan is not None else "<g>"]
     ids = path_ids(tris)
     bare_cls = np.where(bare, " n", "").tolist()
     moves = [f' transform="translate({x} {y})"' if x or y else "" for x, y in off.tolist()]
@@ -893,23 +885,24 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     kept = np.ones(p, bool)
     kept[inside] = False
     animated = sum(1 for a, k in zip(d_anims, kept.tolist()) if a and k) + (sum(map(bool, m_anims)) if sets else 0)
-    report.counts["color_animations"] = sum(map(bool, c_anims))  # counted now: the loop hands each text over
+    report.counts["color_animations"] = sum(bool(c_anims[a]) for a in starts[:-1].tolist())  # counted now: the
+    # loop hands each text over
     for a, b in zip(starts[:-1].tolist(), starts[1:].tolist()):
         if a in opens:
             out.append(opens[a])
         if a in merged:
             k = merged[a]
-            body = m_anims[k]
-            el = f'<path id="{ids[a]}" class="c{cls[a]}" d="{m_first[k]}"'
+            body = m_anims[k] + (c_anims[a] if shared is not None else "")
+            el = f'<path id="{ids[a]}" class="{names[a]}" d="{m_first[k]}"'
         else:
             body = d_anims[a] + c_anims[a]
             d_anims[a] = c_anims[a] = ""  # each text lives on only in the document's
-            el = f'<path id="{ids[a]}" class="c{cls[a]}{bare_cls[a]}"{moves[a]} d="{d_first[a]}"'
+            el = f'<path id="{ids[a]}" class="{names[a]}{bare_cls[a]}"{moves[a]} d="{d_first[a]}"'
         out.append(f"{el}>{body}</path>" if body else f"{el}/>")
         if b - 1 in closes:
             out.append(CLOSE)
     if sets:  # the merged paths' own keys replace their triangles' single ones in the counts
-        inside_keys = int(key_counts[inside].sum())
+        inside_keys = int(np.where(moving[inside], key_counts[inside], 1).sum())  # as _keyed counted them
         n_keys += m_keys - inside_keys
         report.counts["merged_paths"] = len(sets)
         report.counts["merged_triangles"] = int(len(inside))
@@ -921,7 +914,8 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     report.counts["static_paths"] = int((~moving).sum())
     report.counts["palette"] = len(palette)
     report.counts["animated_paths"] = animated
-    err = color_error(sheet.face_rgb, active, ckeys, columns)
+    err = (color_error(sheet.face_rgb, active, ckeys, columns) if shared is None
+           else shared_colours.played_error(sheet.face_rgb, columns, active, shared))
     report.figures["color_error_max_levels"] = float(err.max(initial=0.0))
     report.figures["color_error_p99_levels"] = float(np.percentile(err, 99, overwrite_input=True)) if err.size else 0.0
     report.figures["keys_per_path"] = n_keys / max(p, 1)

@@ -10,6 +10,12 @@ def test_cube_flat_animation_golden(golden):
     golden("cube_flat.svg", result.data)
 
 
+def test_cube_flat_exact_golden(golden):
+    """--exact: the former default, one path per triangle with its own colour steps."""
+    result = convert_animation(cube_animation(6), ConversionOptions(size=64, exact=True))
+    golden("cube_flat_exact.svg", result.data)
+
+
 def test_cube_flat_raw_golden(golden):
     result = convert_animation(cube_animation(4), ConversionOptions(size=64, raw=True))
     golden("cube_flat_raw.svg", result.data)

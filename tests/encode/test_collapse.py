@@ -69,14 +69,18 @@ def sample_sheet(sample_path):
     return extract(anim, fit_camera(anim, 128))
 
 
-def test_exact_colours_by_default_and_static_colours_by_option(sample_sheet):
-    fast, exact = Report(), Report()
+def test_exact_colours_by_option_shared_by_default_and_static_by_option(sample_sheet):
+    fast, shared, exact = Report(), Report(), Report()
     a = svg_anim.write(sample_sheet, ConversionOptions(size=128, color_tolerance=255), fast)
-    svg_anim.write(sample_sheet, ConversionOptions(size=128), exact)
+    b = svg_anim.write(sample_sheet, ConversionOptions(size=128), shared)
+    svg_anim.write(sample_sheet, ConversionOptions(size=128, exact=True), exact)
     assert b'attributeName="color"' not in a and b'attributeName="class"' not in a
     assert exact.counts["color_animations"] > 0 and exact.figures["color_error_max_levels"] <= 3
-    assert fast.figures["color_error_max_levels"] > 3  # the cost of static colours, reported
+    assert 3 < shared.figures["color_error_max_levels"] <= 8  # the default tolerance, reported
+    assert shared.counts["color_animations"] < exact.counts["color_animations"] and b'attributeName="color"' not in b
+    assert fast.figures["color_error_max_levels"] > 8  # the cost of static colours, reported
     assert fast.figures["playback_ms_4x"] < exact.figures["playback_ms_4x"]
+    assert shared.figures["playback_ms_4x"] < exact.figures["playback_ms_4x"]
 
 
 def test_mobile_preset_fills_defaults_only():

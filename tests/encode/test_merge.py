@@ -34,7 +34,7 @@ def _elements(data: bytes) -> int:
 @pytest.mark.parametrize("colours", [255.0, 3.0])
 def test_merged_file_keeps_the_bound_and_every_triangle(sample, colours):
     anim, sheet = sample
-    plain, plain_report = _write(sheet, color_tolerance=colours)
+    plain, plain_report = _write(sheet, color_tolerance=colours, exact=True)  # one path per triangle
     data, report = _write(sheet, color_tolerance=colours, max_animations=60)
     v = verify_animation(data, anim)
     assert v.ok, v.summary()

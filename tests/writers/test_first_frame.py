@@ -32,7 +32,7 @@ from tests.svgrender import chromium_frame, iou
 ZOOM = 2.0
 MIN_SSIM = 0.99
 STILL_FRAME = 3
-CASES = ("sample", "gouraud", "still", "rigid", "mobile")
+CASES = ("sample", "exact", "gouraud", "still", "rigid", "mobile")
 _ANIMATION = re.compile(rb"<(?:animate|animateTransform|animateMotion|set)\b[^>]*/>")
 
 
@@ -41,7 +41,8 @@ def outputs(sample_path) -> dict[str, bytes]:
     rigid = convert_animation(captured_head(n_frames=48),
                               ConversionOptions(size=192, occlusion=False, tolerance=0.25, rigid=True))
     assert b"<animateTransform" in rigid.data  # the case needs rigid groups
-    return {"sample": convert(sample_path, ConversionOptions()).data,
+    return {"sample": convert(sample_path, ConversionOptions()).data,  # shared colours: gradients
+            "exact": convert(sample_path, ConversionOptions(exact=True)).data,
             "gouraud": convert(sample_path, ConversionOptions(shading="gouraud")).data,
             "still": convert(sample_path, ConversionOptions(frame=STILL_FRAME)).data,
             "rigid": rigid.data,

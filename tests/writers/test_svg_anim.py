@@ -12,6 +12,7 @@ from conftest import cube_animation
 from converter import extract
 from converter.animation import FaceAnimation, Part
 from converter.convert import convert_animation
+from converter.encode import colours
 from converter.encode.budget import viewbox_scale
 from converter.encode.keys import Keys, interpolate
 from converter.options import ConversionOptions, Report
@@ -69,12 +70,12 @@ def test_chapter_drops_hidden_coordinates_and_merges_still_runs():
     assert v.ok and v.max_px <= 0.0071  # exact to 2 decimals
 
 
-def test_bounded_default_is_small_static_shared_and_drops_never_visible():
+def test_bounded_exact_is_small_static_shared_and_drops_never_visible():
     anim = half_moving()
     sheet = sheet_of(anim)
     assert not sheet.visible[:, -1].any()
     raw = svg_anim.encode(sheet, ConversionOptions(), Report(), "raw")
-    data = svg_anim.write(sheet, ConversionOptions(), Report())
+    data = svg_anim.write(sheet, ConversionOptions(exact=True), Report())
     assert len(data) < 0.3 * len(raw)
     ps = paths(data)
     ids = [p.get("id") for p in ps]
@@ -108,7 +109,7 @@ def test_colour_keys_stay_within_colour_tolerance():
     t = np.arange(60)[:, None, None]
     rgb = np.clip(0.5 + 0.3 * np.sin(t / rng.uniform(3, 20, (1, 25, 3))), 0, 1)
     active = rng.random((60, 25)) > 0.15
-    keys = svg_anim.color_keys(rgb, active, 3.0)
+    keys = colours.color_keys(rgb, active, 3.0)
     shown = interpolate(keys)
     assert np.abs(shown - rgb * 255)[active].max() <= 3.0 + 1e-9
     assert np.all(keys.values == np.rint(keys.values))
@@ -121,9 +122,9 @@ def test_colour_keys_in_blocks_are_the_keys_in_one(monkeypatch):
     rgb = np.clip(0.5 + 0.4 * np.sin(t / rng.uniform(2, 30, (1, 23, 3))), 0, 1).astype(np.float32)
     rgb[:, :5] = rgb[:1, :5]  # static colours among the animated ones
     active = rng.random((50, 23)) > 0.2
-    whole = svg_anim.color_keys(rgb, active, 3.0)
+    whole = colours.color_keys(rgb, active, 3.0)
     monkeypatch.setattr(svg_anim.freeknots, "BLOCK_TRACKS", 4)
-    blocks = svg_anim.color_keys(rgb, active, 3.0)
+    blocks = colours.color_keys(rgb, active, 3.0)
     assert whole.values.dtype == np.uint8 and whole.mask[:, 5:].sum() > 2 * 18  # keyed, not all static
     assert np.array_equal(whole.mask, blocks.mask) and np.array_equal(whole.values, blocks.values)
     assert np.abs(interpolate(blocks) - rgb * 255.0)[active].max() <= 3.0 + 1e-6
@@ -159,7 +160,7 @@ def test_colour_steps_hold_within_tolerance_with_the_fewest_steps():
     rgb[:, :2] = rgb[5:6, :2]  # still shades
     active = rng.random((40, 12)) > 0.25
     active[:, 11] = np.arange(40) >= 30  # hidden until frame 30: its step at 0 holds the later colour
-    steps = svg_anim.color_steps(rgb, active, 3.0)
+    steps = colours.color_steps(rgb, active, 3.0)
     assert steps.values.dtype == np.uint8 and steps.mask[0].all() and not steps.mask[40].any()
     held = _held(steps, 40)
     err = np.abs(held - rgb.astype(np.float64) * 255).max(axis=-1)
@@ -169,7 +170,7 @@ def test_colour_steps_hold_within_tolerance_with_the_fewest_steps():
     for j in range(12):
         assert steps.mask[:, j].sum() == _fewest_steps(rgb[:, j].astype(np.float64) * 255, active[:, j], 3.0)
     # The report's colour error is the played one, exactly, whatever the block of paths.
-    report_err = svg_anim.color_error(rgb, active, steps)
+    report_err = colours.color_error(rgb, active, steps)
     assert np.array_equal(np.sort(report_err), np.sort(err.T[active.T].astype(np.float32)))  # reported as float32
 
 
@@ -181,17 +182,17 @@ def test_compiled_colour_steps_are_the_vectorised_ones_and_errors_the_played_one
     rgb = rgb.astype(np.float32)
     active = rng.random((t, n)) > rng.uniform(0, 0.8)
     tolerance = float(rng.uniform(0.3, 4))
-    steps = svg_anim.color_steps(rgb, active, tolerance)
+    steps = colours.color_steps(rgb, active, tolerance)
     want = numpy_color_steps(rgb, active, tolerance)
     assert all(np.array_equal(a, b) for a, b in zip(steps, want))
     held = _held(steps, t)
     err = np.abs(held - rgb.astype(np.float64) * 255).max(axis=-1)
-    got = svg_anim.color_error(rgb, active, steps)
+    got = colours.color_error(rgb, active, steps)
     assert np.array_equal(got, err.T[active.T].astype(np.float32))  # path by path
 
 
 def numpy_color_steps(rgb, active, tolerance, paths=None):
-    """svg_anim.color_steps as it was before it was compiled: a loop over frames vectorised over paths."""
+    """colours.color_steps as it was before it was compiled: a loop over frames vectorised over paths."""
     t, p = active.shape
     mask = np.zeros((t + 1, p), bool)
     values = np.zeros((t + 1, p, 3), np.uint8)
@@ -227,23 +228,23 @@ def test_colour_steps_and_errors_read_columns_of_the_sheet_without_a_copy():
     wide = rng.random((30, 14, 3)).astype(np.float32)  # the Sheet's face colours; the paths are some of its faces
     paths = np.array([9, 2, 13, 5, 0, 7])
     active = rng.random((30, 6)) > 0.3
-    copy = svg_anim.color_steps(wide[:, paths], active, 3.0)
-    steps = svg_anim.color_steps(wide, active, 3.0, paths)
+    copy = colours.color_steps(wide[:, paths], active, 3.0)
+    steps = colours.color_steps(wide, active, 3.0, paths)
     assert np.array_equal(steps.mask, copy.mask) and np.array_equal(steps.values, copy.values)
     assert steps.mask.sum() > 6 * 3  # random shades: many steps, so the comparison means something
-    assert np.array_equal(svg_anim.color_error(wide, active, steps, paths),
-                          svg_anim.color_error(wide[:, paths], active, copy))
+    assert np.array_equal(colours.color_error(wide, active, steps, paths),
+                          colours.color_error(wide[:, paths], active, copy))
 
 
 def test_svg_colours_are_discrete_steps_that_play_within_the_tolerance():
-    """In the file: exact-colour paths animate colour with calcMode discrete; read back as a player does
+    """In the exact file: paths animate their own colour with calcMode discrete; read back as a player does
     (each frame at k / T takes the last keyTime at or before it), every shown frame is within 3 levels."""
     anim = half_moving(30)
     rng = np.random.default_rng(4)
     sheet = sheet_of(anim)
     sheet = dataclasses.replace(sheet, face_rgb=np.clip(sheet.face_rgb + 0.05 * np.sin(
         np.arange(30)[:, None, None] / rng.uniform(1, 6, (1, sheet.face_rgb.shape[1], 3))), 0, 1).astype(np.float32))
-    data = svg_anim.write(sheet, ConversionOptions(), Report())
+    data = svg_anim.write(sheet, ConversionOptions(exact=True), Report())
     t = sheet.n_frames
     animated = 0
     for p in paths(data):
@@ -269,7 +270,7 @@ def test_colour_keys_extrapolated_past_black_stay_within_tolerance():
     rgb = np.clip((10 + 4.0 * (t - 40)) / 255 + 0.0 * np.ones((1, 2, 3)), 0, 1)
     rgb[:, 1] = 1 - rgb[:, 1]  # and one past white
     active = np.broadcast_to(t[:, :, 0] >= 40, (60, 2))
-    keys = svg_anim.color_keys(rgb, active, 3.0)
+    keys = colours.color_keys(rgb, active, 3.0)
     assert np.abs(interpolate(keys) - rgb * 255)[active].max() <= 3.0 + 1e-9
     assert keys.values.min() >= 0 and keys.values.max() <= 255
 
@@ -303,7 +304,7 @@ def test_uniform_keys_fitted_a_block_of_paths_at_a_time_are_the_same_file(monkey
     fitted: list[int] = []
     fit = svg_anim.keyframes.uniform_fit
     monkeypatch.setattr(svg_anim.keyframes, "uniform_fit", lambda x, *a: fitted.append(x.shape[1]) or fit(x, *a))
-    opts = ConversionOptions(size=96, occlusion=False)
+    opts = ConversionOptions(size=96, occlusion=False, exact=True)  # merged paths are keyed together, not fitted
     one = convert_animation(anim, opts)
     assert max(fitted) > 2
     fitted.clear()
