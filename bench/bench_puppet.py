@@ -4,15 +4,18 @@ Faces: the tests' generated face (tests/puppet/faces.py), and where ../shared/da
 the Ready Player Me avatar, each with the real Live Link Face take (livelinkface_MySlate_3.csv) embedded and a
 4,000-frame take of the same 61 columns. Build CPU is the puppet stage and the writer (loading the face and the
 capture is the loaders' cost, shown apart); the package is the HTML without a take, raw and gzipped. Playback
-(issue 52): each face with the Live Link Face take playing, rAF fps in Chromium (1x, 4x), Firefox ESR and WebKitGTK.
+(issue 52): each face with the Live Link Face take playing, rAF fps in Chromium (1x, 4x), Firefox ESR and WebKitGTK;
+and the CPU a frame costs Chromium's threads (from /proc), which a loaded machine blurs less than fps.
 """
 
 from __future__ import annotations
 
 import gzip
+import os
 import sys
 import tempfile
 import time
+from collections import Counter, defaultdict
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -83,6 +86,74 @@ def draw_ms(pages: list[bytes]) -> list[tuple[float, float, str]]:
             cdp.send("Emulation.setCPUThrottlingRate", {"rate": THROTTLE})
             slow = page.evaluate(DRAW_LOOP, DRAWS)
             out.append((plain, slow, page.evaluate("() => puppet.renderer")))
+            page.close()
+    return out
+
+
+# One take frame after another, each evaluated, drawn and finished (gl.finish): the CPU the browser's threads spend a
+# frame, read from /proc around the loop (more robust than fps on a loaded machine).
+FINISH_LOOP = """(n) => { const T = Math.max(puppet.duration, 0.01), c = document.getElementById('puppet-canvas');
+  const gl = puppet.renderer.startsWith('webgl') ? (c.getContext('webgl2') || c.getContext('webgl')) : null;
+  for (let i = 0; i < n; i++) { puppet.seek((i % 97) / 97 * T); if (gl) gl.finish(); }
+}"""
+CPU_FRAMES = 200
+CPU_COLUMNS = ("renderer main", "GPU main", "GL raster", "other")
+
+
+def _chromium_cpu() -> Counter:
+    """CPU seconds so far of each thread of the Chromium processes under this one, by CPU_COLUMNS group."""
+    tick = os.sysconf("SC_CLK_TCK")
+    children: dict[int, list[int]] = defaultdict(list)
+    for d in os.listdir("/proc"):
+        try:
+            children[int(Path(f"/proc/{d}/stat").read_text().rsplit(")", 1)[1].split()[1])].append(int(d))
+        except (OSError, ValueError, IndexError):
+            continue
+    out: Counter = Counter()
+    todo = list(children[os.getpid()])
+    while todo:
+        pid = todo.pop()
+        todo += children[pid]
+        try:
+            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            tids = os.listdir(f"/proc/{pid}/task")
+        except OSError:
+            continue
+        if "chrom" not in cmd.split(" ", 1)[0]:
+            continue
+        kind = "renderer" if "--type=renderer" in cmd else "gpu" if "--type=gpu-process" in cmd else "other"
+        for tid in tids:
+            try:
+                stat = Path(f"/proc/{pid}/task/{tid}/stat").read_text()
+            except OSError:
+                continue
+            name = stat[stat.index("(") + 1:stat.rindex(")")]
+            fields = stat.rsplit(")", 1)[1].split()
+            group = ("renderer main" if kind == "renderer" and name.startswith("chrom") else
+                     "GPU main" if kind == "gpu" and name.startswith("chrom") else
+                     "GL raster" if kind == "gpu" and name.startswith("Thread<") else "other")  # SwiftShader's workers
+            out[group] += (int(fields[11]) + int(fields[12])) / tick
+    return out
+
+
+def cpu_ms(pages: list[bytes]) -> list[dict[str, float]]:
+    """Per page, the CPU ms a frame of Chromium's threads (CPU_COLUMNS) drawing the take in FINISH_LOOP, or []."""
+    exe = chromium_path()
+    if not exe:
+        return []
+    out = []
+    with launched_chromium(exe) as browser, tempfile.TemporaryDirectory() as tmp:
+        for k, data in enumerate(pages):
+            path = Path(tmp) / f"p{k}.html"
+            path.write_bytes(data)
+            page = browser.new_page(viewport={"width": 1024, "height": 800})
+            page.goto(path.as_uri() + "?paused")
+            page.wait_for_function("() => document.documentElement.dataset.puppet", timeout=120000)
+            page.evaluate(FINISH_LOOP, 20)
+            before = _chromium_cpu()
+            page.evaluate(FINISH_LOOP, CPU_FRAMES)
+            after = _chromium_cpu()
+            out.append({g: 1000 * (after[g] - before[g]) / CPU_FRAMES for g in CPU_COLUMNS})
             page.close()
     return out
 
@@ -244,5 +315,14 @@ def run() -> str:
                  f"evaluate and draw a frame (mean of {DRAWS}), unthrottled and at {THROTTLE}x CPU throttling:\n\n"
                  "| face | renderer | ms a frame | ms at 4x |\n|---|---|---|---|\n" +
                  "\n".join(f"| {label} | {r} | {a:.1f} | {b:.1f} |" for label, (a, b, r) in zip(labels, timing)))
+    cpu = cpu_ms(played) if takes else []
+    if cpu:
+        note += (f"\n\nThe same in CPU: Chromium's threads' CPU ms a frame (from /proc) over {CPU_FRAMES} frames of the take, "
+                 "each drawn and finished (gl.finish) before the next, unthrottled: the renderer's main thread (the "
+                 "script), the GPU process's main thread, its SwiftShader workers (GL raster) and the rest (one "
+                 "load average's noise is in these, less than in fps):\n\n"
+                 "| face | " + " | ".join(CPU_COLUMNS) + " | total |\n|---|" + "---|" * (len(CPU_COLUMNS) + 1) + "\n" +
+                 "\n".join(f"| {label} | " + " | ".join(f"{row[g]:.2f}" for g in CPU_COLUMNS) +
+                           f" | {sum(row.values()):.2f} |" for label, row in zip(labels, cpu)))
     fps = fps_table(labels, live) if live else ""
     return head + "\n" + "\n".join(rows) + note + fps + sweep

@@ -145,6 +145,8 @@
         this.normals[3 * i] = x / l; this.normals[3 * i + 1] = y / l; this.normals[3 * i + 2] = z / l;
       }
       this.head = [0, 0, 0];
+      this.headMatrix = null;  // evaluate's head turn (NDC -> clip), null at rest
+      this.placed = false;
       const param = (p) => {
         const v = view(buf, a[p.key + ".v"]).slice(), rows = view(buf, a[p.key + ".xy"]), z = view(buf, a[p.key + ".z"]);
         for (let m = 1; m < v.length; m++) v[m] += v[m - 1];  // stored as gaps
@@ -171,7 +173,12 @@
       this.morphs = meta.morphs.map(param);
       this.eyes = meta.eyes.map((e) => ({ centre: e.centre, v: view(buf, a[e.key + ".v"]) }));
       this.q = new Float64Array(3 * this.V);
-      this.xy = new Float32Array(2 * this.V);
+      this.bxy = new Float32Array(2 * this.V);  // before the head turn (evaluate)
+      this.bz = new Float32Array(this.V);
+      this.bxy.set(this.xy0);
+      this.bz.set(this.z0);
+      this.version = 0;
+      this.xy = new Float32Array(2 * this.V);  // after it (place)
       this.z = new Float32Array(this.V);
       this.own = new Map(this.morphs.map((p, k) => [p.name, k]));
       this.byKey = new Map();
@@ -225,9 +232,8 @@
     // srgb(linear(base) * (ambient + diffuse * max(n.l, 0))), converter.lighting.lambert.
     shade(l, out) {
       const n = this.normals, amb = this.meta.light.ambient, dif = this.meta.light.diffuse;
-      const c = this.linear || (this.linear = Float32Array.from(this.colors, (v) => decode(v / 255)));
       // encode(c g) = 1.055 c^(1/2.4) g^(1/2.4) - 0.055 above the curve's linear toe: one pow per element
-      const root = this.linearRoot || (this.linearRoot = Float32Array.from(c, (v) => Math.pow(v, 1 / 2.4)));
+      const [c, root] = this.linearColours();
       for (let i = 0; i < n.length / 3; i++) {
         const g = amb + dif * Math.max(n[3 * i] * l[0] + n[3 * i + 1] * l[1] + n[3 * i + 2] * l[2], 0);
         const G = Math.pow(g, 1 / 2.4);
@@ -240,6 +246,15 @@
       return out;
     }
 
+    // Each lit element's linear base colour and its 2.4th root (the sRGB encode's pow, taken once).
+    linearColours() {
+      if (!this.linear) {
+        this.linear = Float32Array.from(this.colors, (v) => decode(v / 255));
+        this.linearRoot = Float32Array.from(this.linear, (v) => Math.pow(v, 1 / 2.4));
+      }
+      return [this.linear, this.linearRoot];
+    }
+
     // World point of pixel (x, y) and NDC depth z into out[0..2]: the camera's inverse.
     unproject(x, y, z, out) {
       const m = this.meta.inverse, nx = 2 * x / this.meta.width - 1, ny = 1 - 2 * y / this.meta.height;
@@ -249,10 +264,29 @@
       out[2] = (m[8] * nx + m[9] * ny + m[10] * z + m[11]) / w;
     }
 
-    // Positions (px) and NDC depth of the pose: weights per morph, head [yaw, pitch, roll], eyes [ly, lp, ry, rp]
-    // (converter.puppet.model.pose, the same arithmetic).
+    // The pose's positions before the head turn (px and NDC depth in bxy, bz: the morphs summed, the eyes turned
+    // about their centres) and the head turn as one matrix (headMatrix), converter.puppet.model.pose's arithmetic
+    // in two steps: place() applies the turn in script, the WebGL2 vertex shader applies it itself. The morph sums
+    // are skipped when the weights and eyes are those of the previous call (version counts the changes).
     evaluate(weights, head, eyes) {
-      const xy = this.xy, z = this.z;
+      this.head = [head[0], head[1], head[2]];
+      const [yaw, pitch, roll] = head, [px, py, pz] = this.meta.pivot;
+      const r = yaw || pitch || roll ? rotation(yaw, pitch, roll) : null;
+      // project . turn about the pivot . unproject: NDC in, clip out
+      this.headMatrix = r ? product(this.meta.matrix, product([r[0], r[1], r[2], px - r[0] * px - r[1] * py - r[2] * pz,
+                                                               r[3], r[4], r[5], py - r[3] * px - r[4] * py - r[5] * pz,
+                                                               r[6], r[7], r[8], pz - r[6] * px - r[7] * py - r[8] * pz,
+                                                               0, 0, 0, 1], this.meta.inverse)) : null;
+      this.placed = false;
+      const last = this.lastWeights, lastEyes = this.lastEyes;
+      let same = !!last && last.length === weights.length;
+      for (let k = 0; same && k < weights.length; k++) same = last[k] === weights[k];
+      for (let k = 0; same && k < 4; k++) same = lastEyes[k] === (eyes[k] || 0);
+      if (same) return;
+      this.lastWeights = Float32Array.from(weights);
+      this.lastEyes = [0, 1, 2, 3].map((k) => eyes[k] || 0);
+      this.version = (this.version || 0) + 1;
+      const xy = this.bxy, z = this.bz;
       xy.set(this.xy0);
       z.set(this.z0);
       this.morphs.forEach((p, k) => {
@@ -264,48 +298,56 @@
         if (i > 0) this.addKeyform(p, i, 1 - a, xy, z);  // keyform 0 (weight 0) moves nothing
         this.addKeyform(p, i + 1, a, xy, z);
       });
-      this.head = [head[0], head[1], head[2]];
-      const [yaw, pitch, roll] = head, turnHead = yaw || pitch || roll;
       const turnEyes = this.eyes.map((e, k) => eyes[2 * k] || eyes[2 * k + 1]);
-      if (!turnHead && !turnEyes.some(Boolean)) return;
-      // Rigid turns in world space, as blendshapes.drive turns the morphed face: eyes about their centres, then
-      // the head about its pivot (R = Ry Rx Rz), projected again. A vertex no eye turns goes through one matrix:
-      // project . turn about the pivot . unproject, applied to its pixel and depth.
+      if (!turnEyes.some(Boolean)) return;
+      // Rigid turns in world space, as blendshapes.drive turns the morphed face: eyes about their centres, projected
+      // again (the head's turn follows, through headMatrix: it unprojects them to where they were turned).
       const q = this.q, t = [0, 0, 0], m = this.meta.matrix, W = this.meta.width, H = this.meta.height;
       const turned = this.turned || (this.turned = new Uint8Array(this.V));
       turned.fill(0);
       this.eyes.forEach((e, k) => {
         if (!turnEyes[k]) return;
-        const r = rotation(eyes[2 * k], eyes[2 * k + 1], 0), [cx, cy, cz] = e.centre;
+        const re = rotation(eyes[2 * k], eyes[2 * k + 1], 0), [cx, cy, cz] = e.centre;
         for (const v of e.v) {
           if (!turned[v]) {
             this.unproject(xy[2 * v], xy[2 * v + 1], z[v], t);
             q[3 * v] = t[0]; q[3 * v + 1] = t[1]; q[3 * v + 2] = t[2];
             turned[v] = 1;
           }
-          turn(q, 3 * v, r, cx, cy, cz);
+          turn(q, 3 * v, re, cx, cy, cz);
         }
       });
-      const [px, py, pz] = this.meta.pivot, r = turnHead ? rotation(yaw, pitch, roll) : null;
-      const c = r ? product(m, product([r[0], r[1], r[2], px - r[0] * px - r[1] * py - r[2] * pz,
-                                        r[3], r[4], r[5], py - r[3] * px - r[4] * py - r[5] * pz,
-                                        r[6], r[7], r[8], pz - r[6] * px - r[7] * py - r[8] * pz,
-                                        0, 0, 0, 1], this.meta.inverse)) : null;
-      for (let v = 0; v < this.V; v++) {
-        if (turned[v]) {
-          if (r) turn(q, 3 * v, r, px, py, pz);
+      this.eyes.forEach((e) => {
+        for (const v of e.v) {
+          if (turned[v] !== 1) continue;
+          turned[v] = 2;
           const X = q[3 * v], Y = q[3 * v + 1], Z = q[3 * v + 2];
           const cw = m[12] * X + m[13] * Y + m[14] * Z + m[15];
           xy[2 * v] = ((m[0] * X + m[1] * Y + m[2] * Z + m[3]) / cw + 1) * 0.5 * W;
           xy[2 * v + 1] = (1 - (m[4] * X + m[5] * Y + m[6] * Z + m[7]) / cw) * 0.5 * H;
           z[v] = (m[8] * X + m[9] * Y + m[10] * Z + m[11]) / cw;
-        } else if (c) {
-          const nx = 2 * xy[2 * v] / W - 1, ny = 1 - 2 * xy[2 * v + 1] / H, nz = z[v];
-          const cw = c[12] * nx + c[13] * ny + c[14] * nz + c[15];
-          xy[2 * v] = ((c[0] * nx + c[1] * ny + c[2] * nz + c[3]) / cw + 1) * 0.5 * W;
-          xy[2 * v + 1] = (1 - (c[4] * nx + c[5] * ny + c[6] * nz + c[7]) / cw) * 0.5 * H;
-          z[v] = (c[8] * nx + c[9] * ny + c[10] * nz + c[11]) / cw;
         }
+      });
+    }
+
+    // The evaluated pose's positions (px) and NDC depth in xy, z: the head turned in script (canvas, WebGL1 and
+    // positions(); WebGL2 turns it in its vertex shader).
+    place() {
+      if (this.placed) return;
+      this.placed = true;
+      const xy = this.xy, z = this.z, bxy = this.bxy, bz = this.bz, c = this.headMatrix;
+      if (!c) {
+        xy.set(bxy);
+        z.set(bz);
+        return;
+      }
+      const W = this.meta.width, H = this.meta.height;
+      for (let v = 0; v < this.V; v++) {
+        const nx = 2 * bxy[2 * v] / W - 1, ny = 1 - 2 * bxy[2 * v + 1] / H, nz = bz[v];
+        const cw = c[12] * nx + c[13] * ny + c[14] * nz + c[15];
+        xy[2 * v] = ((c[0] * nx + c[1] * ny + c[2] * nz + c[3]) / cw + 1) * 0.5 * W;
+        xy[2 * v + 1] = (1 - (c[4] * nx + c[5] * ny + c[6] * nz + c[7]) / cw) * 0.5 * H;
+        z[v] = (c[8] * nx + c[9] * ny + c[10] * nz + c[11]) / cw;
       }
     }
   }
@@ -343,32 +385,47 @@
     q[i + 2] = r[6] * x + r[7] * y + r[8] * z + cz;
   }
 
-  // WebGL: depth-tested triangles, back faces culled. WebGL2 uploads the evaluated vertices as a float texture each
-  // frame and the vertex shader fetches each corner's vertex; WebGL1 rebuilds the corners in JS.
+  // A row-major 4x4 matrix as GLSL's column-major floats (the identity for null).
+  function columns(m) {
+    const o = new Float32Array(16);
+    for (let i = 0; i < 4; i++) {
+      for (let j = 0; j < 4; j++) o[4 * j + i] = m ? m[4 * i + j] : +(i === j);
+    }
+    return o;
+  }
+
+  // WebGL: depth-tested triangles, back faces culled, each corner lit in the vertex shader. WebGL2 keeps the vertices
+  // before the head turn in a float texture (those the morphs and eyes move first: a frame uploads only their rows,
+  // and none when only the head turned), turns the head in the vertex shader (headMatrix) and draws indexed, so the
+  // shader runs about once a vertex; WebGL1 rebuilds every corner in script.
   class GLView {
     constructor(canvas, model) {
-      const opts = { antialias: false, preserveDrawingBuffer: true, alpha: true, premultipliedAlpha: false };
+      // The drawing buffer is handed to the compositor, not copied each frame (read the canvas in the task that
+      // draws it); alpha is 0 or 1, so premultiplied or not are the same pixels.
+      const opts = { antialias: false, preserveDrawingBuffer: false, alpha: true, premultipliedAlpha: true };
       const gl = canvas.getContext("webgl2", opts) || canvas.getContext("webgl", opts);
       if (!gl) throw new Error("no WebGL");
       this.gl = gl;
       this.model = model;
       const two = typeof window.WebGL2RenderingContext !== "undefined" && gl instanceof window.WebGL2RenderingContext;
-      // the vertex shader lights each corner: its base colour c and rest normal n against the turned light
+      const gouraud = model.meta.gouraud, V = model.V, F = model.F, tris = model.tris;
+      // srgb(linear(base) * g), g = ambient + diffuse * max(n.l, 0), from the base's linear value c and its root
+      // r = c^(1/2.4) (model.shade's arithmetic: one pow a corner)
       const lit = "uniform vec3 light; uniform vec2 rig;" +
-        " vec3 dec(vec3 c){ return mix(pow((c + 0.055) / 1.055, vec3(2.4)), c / 12.92, step(c, vec3(0.04045))); }" +
-        " vec3 enc(vec3 c){ return mix(1.055 * pow(max(c, vec3(1e-7)), vec3(1.0 / 2.4)) - 0.055, 12.92 * c," +
-        " step(c, vec3(0.0031308))); }" +
-        " vec3 shade(vec3 c, vec3 n){ float g = rig.x + rig.y * max(dot(normalize(n), light), 0.0);" +
-        " return enc(clamp(dec(c) * g, 0.0, 1.0)); }";
+        " vec3 shade(vec3 c, vec3 r, vec3 n){ float g = rig.x + rig.y * max(dot(n, light), 0.0);" +
+        " vec3 x = c * g, e = 1.055 * min(r * pow(g, 1.0 / 2.4), vec3(1.0)) - 0.055;" +
+        " return mix(e, 12.92 * x, step(x, vec3(0.0031308))); }";
+      // flat: the triangle's colour is its last corner's (GL's provoking vertex), not interpolated
+      const q = two && !gouraud ? "flat " : "";
       const vs = two ?
-        "#version 300 es\nprecision highp float; precision highp int; in int p; in vec3 c; in vec3 n; out vec3 vc;" +
-        "uniform highp sampler2D pos; uniform vec2 scale; " + lit + " void main(){ int w = textureSize(pos, 0).x;" +
-        " vec3 q = texelFetch(pos, ivec2(p % w, p / w), 0).xyz; vc = shade(c, n);" +
-        " gl_Position = vec4(q.x * scale.x - 1.0, 1.0 - q.y * scale.y, q.z, 1.0); }" :
-        "precision highp float; attribute vec3 p; attribute vec3 c; attribute vec3 n; varying vec3 vc; " + lit +
-        " void main(){ vc = shade(c, n); gl_Position = vec4(p, 1.0); }";
+        "#version 300 es\nprecision highp float; precision highp int; in int p; in vec3 c; in vec3 r; in vec3 n; " + q +
+        "out vec3 vc; uniform highp sampler2D pos; uniform mat4 head; " + lit + " void main(){" +
+        " int w = textureSize(pos, 0).x; vec3 b = texelFetch(pos, ivec2(p % w, p / w), 0).xyz; vc = shade(c, r, n);" +
+        " vec4 h = head * vec4(b, 1.0); gl_Position = vec4(h.xyz / h.w, 1.0); }" :
+        "precision highp float; attribute vec3 p; attribute vec3 c; attribute vec3 r; attribute vec3 n;" +
+        " varying vec3 vc; " + lit + " void main(){ vc = shade(c, r, n); gl_Position = vec4(p, 1.0); }";
       const fs = two ?
-        "#version 300 es\nprecision mediump float; in vec3 vc; out vec4 o; void main(){ o = vec4(vc, 1.0); }" :
+        "#version 300 es\nprecision mediump float; " + q + "in vec3 vc; out vec4 o; void main(){ o = vec4(vc, 1.0); }" :
         "precision mediump float; varying vec3 vc; void main(){ gl_FragColor = vec4(vc, 1.0); }";
       const shader = (type, src) => {
         const s = gl.createShader(type);
@@ -380,30 +437,75 @@
       const prog = gl.createProgram();
       gl.attachShader(prog, shader(gl.VERTEX_SHADER, vs));
       gl.attachShader(prog, shader(gl.FRAGMENT_SHADER, fs));
-      gl.bindAttribLocation(prog, 0, "p");
-      gl.bindAttribLocation(prog, 1, "c");
-      gl.bindAttribLocation(prog, 2, "n");
+      ["p", "c", "r", "n"].forEach((name, k) => gl.bindAttribLocation(prog, k, name));
       gl.linkProgram(prog);
       if (!gl.getProgramParameter(prog, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(prog));
       gl.useProgram(prog);
-      const F = model.F, tris = model.tris, colors = model.colors, gouraud = model.meta.gouraud;
-      const rgb = new Uint8Array(9 * F), nrm = new Float32Array(9 * F), normals = model.normals;
-      for (let f = 0; f < F; f++) {
-        for (let c = 0; c < 3; c++) {
-          const src = gouraud ? 3 * tris[3 * f + c] : 3 * f;
-          rgb.set(colors.subarray(src, src + 3), 9 * f + 3 * c);
-          nrm.set(normals.subarray(src, src + 3), 9 * f + 3 * c);
+      // what each drawn vertex reads: its model vertex (src) and its lit element (elem: a vertex, or a triangle)
+      let src, elem, index;
+      if (!two) {  // every corner apart
+        src = tris;
+        elem = gouraud ? tris : Int32Array.from({ length: 3 * F }, (_, i) => (i / 3) | 0);
+      } else if (gouraud) {
+        src = elem = Int32Array.from({ length: V }, (_, v) => v);
+        index = tris;
+      } else {  // each triangle's last corner a vertex of its own: one no triangle before took, else a copy of one
+        const owner = new Int32Array(V).fill(-1), copies = [];
+        index = new Int32Array(3 * F);
+        for (let f = 0; f < F; f++) {
+          let k = 0;
+          while (k < 3 && owner[tris[3 * f + k]] >= 0) k++;
+          if (k < 3) {  // rotated to the end: the same winding
+            owner[tris[3 * f + k]] = f;
+            for (let i = 0; i < 3; i++) index[3 * f + i] = tris[3 * f + (k + 1 + i) % 3];
+          } else {
+            index.set(tris.subarray(3 * f, 3 * f + 3), 3 * f);
+            index[3 * f + 2] = V + copies.length;
+            copies.push(f);
+          }
         }
+        src = new Int32Array(V + copies.length);
+        elem = new Int32Array(V + copies.length);
+        for (let v = 0; v < V; v++) { src[v] = v; elem[v] = Math.max(owner[v], 0); }
+        copies.forEach((f, k) => { src[V + k] = tris[3 * f + 2]; elem[V + k] = f; });
       }
+      const D = src.length, [linear, root] = model.linearColours(), normals = model.normals;
+      const attrs = [new Float32Array(3 * D), new Float32Array(3 * D), new Float32Array(3 * D)];
+      for (let d = 0; d < D; d++) {
+        const e = 3 * elem[d];
+        [linear, root, normals].forEach((a, k) => attrs[k].set(a.subarray(e, e + 3), 3 * d));
+      }
+      attrs.forEach((a, k) => {
+        gl.bindBuffer(gl.ARRAY_BUFFER, gl.createBuffer());
+        gl.bufferData(gl.ARRAY_BUFFER, a, gl.STATIC_DRAW);
+        gl.enableVertexAttribArray(k + 1);
+        gl.vertexAttribPointer(k + 1, 3, gl.FLOAT, false, 0, 0);
+      });
       this.pos = gl.createBuffer();
       gl.bindBuffer(gl.ARRAY_BUFFER, this.pos);
       gl.enableVertexAttribArray(0);
-      if (two) {  // each corner's vertex id; the vertices in an RGBA float texture, TW texels a row
-        gl.bufferData(gl.ARRAY_BUFFER, tris, gl.STATIC_DRAW);
+      this.two = two;
+      this.count = 3 * F;
+      if (two) {
+        // texture slots: the moved vertices first
+        const moved = new Uint8Array(V), slot = new Int32Array(V), order = new Int32Array(V);
+        model.morphs.forEach((p) => p.v.forEach((v) => { moved[v] = 1; }));
+        model.eyes.forEach((e) => e.v.forEach((v) => { moved[v] = 1; }));
+        let k = 0;
+        for (let v = 0; v < V; v++) if (moved[v]) { slot[v] = k; order[k++] = v; }
+        this.moved = k;
+        for (let v = 0; v < V; v++) if (!moved[v]) { slot[v] = k; order[k++] = v; }
+        this.order = order;
+        gl.bufferData(gl.ARRAY_BUFFER, Int32Array.from(src, (v) => slot[v]), gl.STATIC_DRAW);
         gl.vertexAttribIPointer(0, 1, gl.INT, 0, 0);
-        this.TW = Math.min(Math.max(model.V, 1), 2048);
-        this.TH = Math.ceil(Math.max(model.V, 1) / this.TW);
+        gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, gl.createBuffer());
+        const wide = D > 65535;
+        gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, wide ? Uint32Array.from(index) : Uint16Array.from(index), gl.STATIC_DRAW);
+        this.indexType = wide ? gl.UNSIGNED_INT : gl.UNSIGNED_SHORT;
+        this.TW = Math.min(Math.max(V, 1), 2048);
+        this.TH = Math.ceil(Math.max(V, 1) / this.TW);
         this.texels = new Float32Array(4 * this.TW * this.TH);
+        this.fill(model.xy0, model.z0, V);
         this.tex = gl.createTexture();
         gl.activeTexture(gl.TEXTURE0);
         gl.bindTexture(gl.TEXTURE_2D, this.tex);
@@ -413,23 +515,13 @@
         gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
         gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, this.TW, this.TH, 0, gl.RGBA, gl.FLOAT, this.texels);
         gl.uniform1i(gl.getUniformLocation(prog, "pos"), 0);
-        gl.uniform2f(gl.getUniformLocation(prog, "scale"), 2 / model.meta.width, 2 / model.meta.height);
+        this.headAt = gl.getUniformLocation(prog, "head");
+        this.version = -1;
       } else {
-        this.texels = null;
         this.corners = new Float32Array(9 * F);
         gl.bufferData(gl.ARRAY_BUFFER, this.corners, gl.DYNAMIC_DRAW);
         gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
       }
-      const col = gl.createBuffer();
-      gl.bindBuffer(gl.ARRAY_BUFFER, col);
-      gl.bufferData(gl.ARRAY_BUFFER, rgb, gl.STATIC_DRAW);
-      gl.enableVertexAttribArray(1);
-      gl.vertexAttribPointer(1, 3, gl.UNSIGNED_BYTE, true, 0, 0);
-      const nb = gl.createBuffer();
-      gl.bindBuffer(gl.ARRAY_BUFFER, nb);
-      gl.bufferData(gl.ARRAY_BUFFER, nrm, gl.STATIC_DRAW);
-      gl.enableVertexAttribArray(2);
-      gl.vertexAttribPointer(2, 3, gl.FLOAT, false, 0, 0);
       this.lightAt = gl.getUniformLocation(prog, "light");
       gl.uniform2f(gl.getUniformLocation(prog, "rig"), model.meta.light.ambient, model.meta.light.diffuse);
       gl.enable(gl.DEPTH_TEST);
@@ -443,22 +535,35 @@
       this.kind = gl instanceof window.WebGLRenderingContext ? "webgl" : "webgl2";
     }
 
+    // The first n texture slots' texels (NDC) from positions xy (px) and depth z.
+    fill(xy, z, n) {
+      const t = this.texels, order = this.order, sx = 2 / this.model.meta.width, sy = 2 / this.model.meta.height;
+      for (let k = 0; k < n; k++) {
+        const v = order[k];
+        t[4 * k] = xy[2 * v] * sx - 1;
+        t[4 * k + 1] = 1 - xy[2 * v + 1] * sy;
+        t[4 * k + 2] = z[v];
+      }
+    }
+
     draw() {
-      const gl = this.gl, m = this.model, xy = m.xy, z = m.z, tris = m.tris, out = this.corners;
-      const sx = 2 / m.meta.width, sy = 2 / m.meta.height, n = 3 * m.F;
+      const gl = this.gl, m = this.model;
       gl.uniform3fv(this.lightAt, m.light());
-      if (this.texels) {
-        const t = this.texels, V = m.V;
-        for (let v = 0; v < V; v++) {
-          t[4 * v] = xy[2 * v];
-          t[4 * v + 1] = xy[2 * v + 1];
-          t[4 * v + 2] = z[v];
+      if (this.two) {
+        if (this.version !== m.version) {
+          this.version = m.version;
+          this.fill(m.bxy, m.bz, this.moved);
+          const rows = Math.ceil(this.moved / this.TW);
+          if (rows) gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, this.TW, rows, gl.RGBA, gl.FLOAT, this.texels);
         }
-        gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, this.TW, this.TH, gl.RGBA, gl.FLOAT, t);
+        gl.uniformMatrix4fv(this.headAt, false, columns(m.headMatrix));
         gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
-        gl.drawArrays(gl.TRIANGLES, 0, n);
+        gl.drawElements(gl.TRIANGLES, this.count, this.indexType, 0);
         return;
       }
+      m.place();
+      const xy = m.xy, z = m.z, tris = m.tris, out = this.corners, n = this.count;
+      const sx = 2 / m.meta.width, sy = 2 / m.meta.height;
       for (let i = 0; i < n; i++) {
         const v = tris[i];
         out[3 * i] = xy[2 * v] * sx - 1;
@@ -497,7 +602,9 @@
     }
 
     draw() {
-      const m = this.model, xy = m.xy, z = m.z, tris = m.tris, l = m.light();
+      const m = this.model;
+      m.place();
+      const xy = m.xy, z = m.z, tris = m.tris, l = m.light();
       if (l.join() !== this.lightKey) this.relight(l);
       const W = this.W, H = this.H, px = this.pixels, depth = this.depth, rgba = this.rgba, lit = this.lit;
       const gouraud = m.meta.gouraud;
@@ -798,6 +905,16 @@
     }
   }
 
+  // True inside a frame (of the same origin) that carries data-puppet-embed: the embed mode without a URL change.
+  function embedded() {
+    try {
+      const frame = window.frameElement;
+      return !!frame && frame.hasAttribute("data-puppet-embed");
+    } catch (err) {
+      return false;
+    }
+  }
+
   async function start() {
     const meta = JSON.parse($("puppet-meta").textContent);
     if (meta.format !== FORMAT || !VERSIONS.includes(meta.version)) {
@@ -814,6 +931,11 @@
       take = new TakeData(takeMeta, await inflate(base64Bytes(takeEl.textContent), Number(takeEl.dataset.bytes)));
     }
     const params = new URLSearchParams(window.location.search);
+    if (params.has("embed") || embedded()) {  // a page that drives the puppet itself: no Play or Live controls
+      $("puppet-controls").hidden = true;
+      $("puppet-live-row").hidden = true;
+      document.documentElement.dataset.embed = "";
+    }
     const canvas = $("puppet-canvas");
     let viewer = null;
     if (params.get("renderer") !== "canvas") {
@@ -842,7 +964,7 @@
       get frameMs() { return puppet.lastFrameMs; },
       parameters: model.morphs.map((p) => p.name).concat(POSE_NAMES.slice(0, model.eyes.length ? 7 : 3)),
       weights: () => Object.fromEntries(model.morphs.map((p, k) => [p.name, puppet.weightsNow()[k]])),
-      positions: () => ({ xy: Array.from(model.xy), z: Array.from(model.z) }),
+      positions: () => { model.place(); return { xy: Array.from(model.xy), z: Array.from(model.z) }; },
     };
     window.puppet = api;
     const play = $("puppet-play"), scrub = $("puppet-scrub");

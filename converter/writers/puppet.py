@@ -16,12 +16,16 @@ The page carries three blocks and the inlined script (converter/writers/puppet.j
 - `puppet-take`: the embedded capture (model.Take) the same way, its own JSON in `data-meta`; `replace_take`
   swaps it for another without touching the rest (`facesvg puppet-take`).
 
-The script draws with WebGL (depth-tested triangles, positions summed in JS each frame; WebGL2 uploads them as a
-float texture the vertex shader reads) or, without WebGL, rasterises them itself as GL would (pixel centres, a depth
-buffer, back faces dropped) into an image it puts on a canvas 2D in one call (a path and a fill per triangle cost
-far more: bench_puppet). It refuses a package whose format or version it does not know (VERSION), with a message
-saying so. It evaluates no strings and fetches nothing; the only connection it opens is the WebSocket a user names
-(`?live=ws://...` or the Live field).
+The script draws with WebGL (depth-tested triangles, the morphs and eye turns summed in JS each frame, and only when
+they changed; WebGL2 keeps them in a float texture, the vertices the morphs move in its first rows, the only ones
+uploaded, turns the head in the vertex shader with one matrix and draws indexed, a flat triangle's colour from a last
+corner of its own; WebGL1 rebuilds every corner in script) or, without WebGL, rasterises them itself as GL would
+(pixel centres, a depth buffer, back faces dropped) into an image it puts on a canvas 2D in one call (a path and a
+fill per triangle cost far more: bench_puppet). The WebGL drawing buffer is not preserved once composited: read the
+canvas in the task that draws it (`puppet.render()` then `toDataURL`). It refuses a package whose format or version it
+does not know (VERSION), with a message saying so. It evaluates no strings and fetches nothing; the only connection it
+opens is the WebSocket a user names (`?live=ws://...` or the Live field). `?embed`, or a frame element carrying
+`data-puppet-embed` (the web app's /live page), hides its Play and Live rows for a page that drives it itself.
 """
 
 from __future__ import annotations
@@ -320,7 +324,7 @@ html{color-scheme:light dark}body{margin:0;font:14px/1.4 system-ui,sans-serif}
 #puppet{display:flex;flex-wrap:wrap;gap:12px;padding:8px;align-items:flex-start}
 #puppet-stage{display:flex;flex-direction:column;gap:6px}
 #puppet-canvas{display:block;max-width:100%;height:auto;background:transparent}
-.puppet-row{display:flex;align-items:center;gap:8px;flex-wrap:wrap}
+.puppet-row{display:flex;align-items:center;gap:8px;flex-wrap:wrap}.puppet-row[hidden]{display:none}
 .puppet-row input[type=range]{flex:1;min-width:80px}
 #puppet-live-url{flex:1;min-width:160px}
 #puppet-sliders{max-height:80vh;overflow:auto;min-width:260px}
@@ -337,12 +341,12 @@ HTML = """<!doctype html>
 <div id="puppet">
 <div id="puppet-stage">
 <canvas id="puppet-canvas" width="{width}" height="{height}" aria-label="{title}: face puppet"></canvas>
-<div class="puppet-row">
+<div class="puppet-row" id="puppet-controls">
 <button type="button" id="puppet-play" aria-pressed="false">Play</button>
 <input type="range" id="puppet-scrub" min="0" max="1" step="any" value="0" aria-label="Time">
 <output id="puppet-time">0.00 s</output>
 </div>
-<div class="puppet-row">
+<div class="puppet-row" id="puppet-live-row">
 <input type="url" id="puppet-live-url" placeholder="ws://host:port (live weights)" aria-label="Live WebSocket URL">
 <button type="button" id="puppet-live">Connect</button>
 </div>

@@ -59,9 +59,13 @@ def quantised(track: WeightTrack, take) -> WeightTrack:
     return WeightTrack(track.names, track.times, w, track.fps, head=head, eye_left=left, eye_right=right)
 
 
+# The WebGL drawing buffer is not preserved once composited: draw and read in one task.
+SNAPSHOT = "() => { puppet.render(); return document.getElementById('puppet-canvas').toDataURL('image/png'); }"
+
+
 def canvas_alpha(page) -> np.ndarray:
-    """The puppet canvas's alpha (H, W) uint8."""
-    url = page.evaluate("() => document.getElementById('puppet-canvas').toDataURL('image/png')")
+    """The puppet canvas's alpha (H, W) uint8, drawn again and read at once."""
+    url = page.evaluate(SNAPSHOT)
     return np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("RGBA"))[..., 3]
 
 
@@ -241,8 +245,8 @@ def test_a_live_websocket_message_drives_the_puppet(browser, tmp_path, face):
 
 
 def canvas_rgb(page) -> np.ndarray:
-    """The puppet canvas's RGB (H, W, 3) uint8."""
-    url = page.evaluate("() => document.getElementById('puppet-canvas').toDataURL('image/png')")
+    """The puppet canvas's RGB (H, W, 3) uint8, drawn again and read at once."""
+    url = page.evaluate(SNAPSHOT)
     return np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("RGB")).astype(int)
 
 
@@ -293,3 +297,72 @@ def test_the_player_refuses_a_format_it_does_not_know(browser, tmp_path, puppet,
         assert f"format facesvg-puppet {version}" in status and "does not know" in status
     finally:
         page.close()
+
+
+def canvas_rgba(page) -> np.ndarray:
+    """The puppet canvas's RGBA (H, W, 4), drawn again and read at once."""
+    url = page.evaluate(SNAPSHOT)
+    return np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("RGBA")).astype(int)
+
+
+@pytest.mark.browser
+@pytest.mark.parametrize("shading", ["flat", "gouraud"])
+def test_webgl_draws_what_the_script_raster_draws(browser, tmp_path, face, shading):
+    """WebGL2 (the head turned in the vertex shader, indexed, a flat triangle's colour from a last corner of its own)
+    and the canvas fallback (all of it in script, as GL rasterises) colour the same pixels alike, in a pose with
+    weights, the head and both eyes turned."""
+    puppet = puppet_of(face, ConversionOptions(size=256, shading=shading))
+    data = writer.write(puppet, ConversionOptions(), Report())
+    pose_values = {"jawOpen": 0.7, "mouthSmileLeft": 0.4, "eyeBlinkLeft": 0.3, "headYaw": 0.3, "headPitch": -0.2,
+                   "headRoll": 0.15, "eyeYawLeft": 0.25, "eyePitchLeft": -0.1, "eyeYawRight": -0.2,
+                   "eyePitchRight": 0.15}
+    shots, xy = {}, {}
+    for renderer in ("webgl2", "canvas"):
+        page = open_puppet(browser, tmp_path, data, "?paused" + ("&renderer=canvas" if renderer == "canvas" else ""))
+        try:
+            assert page.evaluate("() => puppet.renderer") == renderer
+            page.evaluate("(v) => { puppet.set(v); }", pose_values)
+            shots[renderer] = canvas_rgba(page)
+            xy[renderer], _ = js_positions(page)
+        finally:
+            page.close()
+    gl, cv = shots["webgl2"], shots["canvas"]
+    assert np.abs(xy["webgl2"] - xy["canvas"]).max() == 0  # one evaluator
+    drawn_gl, drawn_cv = gl[..., 3] > 127, cv[..., 3] > 127
+    assert drawn_gl.sum() > 5000 and iou(drawn_gl, drawn_cv) >= 0.995
+    both = drawn_gl & drawn_cv
+    alike = (np.abs(gl[..., :3] - cv[..., :3]).max(axis=-1) <= 2)[both]
+    assert alike.mean() >= 0.98, alike.mean()
+
+
+CONTROLS = "() => ['puppet-controls', 'puppet-live-row', 'puppet-sliders'].map((id) => " \
+           "document.getElementById(id).getBoundingClientRect().height > 0)"
+
+
+@pytest.mark.browser
+def test_embed_mode_hides_the_play_and_live_controls(browser, tmp_path, puppet):
+    """?embed, or a frame carrying data-puppet-embed (the web app's /live page), hides the player's own Play and
+    Live rows; the sliders and the API stay."""
+    data = writer.write(puppet, ConversionOptions(), Report())
+    for query, shown in (("?paused", [True, True, True]), ("?paused&embed", [False, False, True])):
+        page = open_puppet(browser, tmp_path, data, query)
+        try:
+            assert page.evaluate(CONTROLS) == shown, query
+        finally:
+            page.close()
+    host = ('<!doctype html><iframe id="a" src="/puppet.html?paused" data-puppet-embed width="900" height="700">'
+            '</iframe><iframe id="b" src="/puppet.html?paused" width="900" height="700"></iframe>')
+    page = browser.new_page(viewport={"width": 1000, "height": 1600})
+    try:
+        page.route("http://puppet.test/**", lambda route: route.fulfill(
+            body=data if route.request.url.split("?")[0].endswith("/puppet.html") else host.encode(),
+            content_type="text/html"))
+        page.goto("http://puppet.test/host.html")
+        got = {}
+        for name in "ab":
+            frame = page.locator(f"#{name}").element_handle().content_frame()
+            frame.wait_for_function("() => document.documentElement.dataset.puppet === 'ready'", timeout=60000)
+            got[name] = frame.evaluate(CONTROLS)
+    finally:
+        page.close()
+    assert got == {"a": [False, False, True], "b": [True, True, True]}
