@@ -11,6 +11,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import http.server
+import tempfile
 import threading
 import time
 from collections.abc import Iterator
@@ -18,10 +19,14 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import NamedTuple
 
+from marionette_driver.errors import ScriptTimeoutException as MarionetteScriptTimeout
+from marionette_driver.errors import TimeoutException as MarionetteTimeout
 from playwright.sync_api import Browser
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
+from selenium.common.exceptions import TimeoutException as WebDriverTimeout
 
 from tests.conftest import chromium_path, launched_chromium
+from tests.engines import PAGE, Firefox, Session, WebKit
 
 THROTTLES = (1, 4, 6)  # CDP CPU throttling rates: a desktop, a mid-range phone, a low-end phone
 
@@ -83,9 +88,10 @@ def host_page(svg_name: str, size: int) -> str:
 
 
 def measure(browser: Browser, url: str, size: int, throttle: float, seconds: float,
-            load_seconds: float = 300.0, state: str | None = None) -> Playback | None:
+            load_seconds: float = 300.0, state: str | None = None, warm: float = 0.0) -> Playback | None:
     """Play the page at url for `seconds` under `throttle`x CPU slowdown and measure it; None when it shows no
-    frame within load_seconds. state: a JavaScript function evaluated in the page after the run (Playback.state)."""
+    frame within load_seconds. state: a JavaScript function evaluated in the page after the run (Playback.state);
+    warm: seconds of play after the first frame before counting starts."""
     context = browser.new_context(viewport={"width": size, "height": size})
     page = context.new_page()
     cdp = context.new_cdp_session(page)
@@ -96,6 +102,8 @@ def measure(browser: Browser, url: str, size: int, throttle: float, seconds: flo
             page.goto(url, wait_until="load", timeout=load_seconds * 1000)
             page.set_default_timeout(load_seconds * 1000)
             first = float(page.evaluate(_FIRST_FRAME))
+            if warm > 0:
+                page.wait_for_timeout(warm * 1000)
         except PlaywrightTimeout:
             return None
         changed = [0, ""]  # frames whose image differs from the previous one, last digest
@@ -134,6 +142,58 @@ def measure(browser: Browser, url: str, size: int, throttle: float, seconds: flo
         )
     finally:
         context.close()
+
+
+# WebDriver / Marionette (the callback is the last argument): rAF callbacks over `secs` after `warm` seconds.
+_SESSION_FPS = """const [warm, secs, done] = arguments;
+setTimeout(() => {
+  let n = 0, t0 = null, t1 = null;
+  const tick = (t) => {
+    if (t0 === null) t0 = t; else { n++; t1 = t; }
+    if (t1 !== null && t1 - t0 >= secs * 1000) done({n, dt: t1 - t0}); else requestAnimationFrame(tick);
+  };
+  requestAnimationFrame(tick);
+}, warm * 1000);"""
+
+
+def session_fps(session: Session, url: str, warm: float, seconds: float) -> float:
+    """requestAnimationFrame callbacks a second over `seconds` after `warm` seconds of play of the document at url
+    (an SVG or a page), in a tests/engines.py session (Firefox ESR, WebKitGTK)."""
+    session.navigate(url)
+    got = session.run_async(_SESSION_FPS, float(warm), float(seconds))
+    return float(got["n"]) / (max(float(got["dt"]), 1.0) / 1000.0)
+
+
+ENGINE_WARM_S, ENGINE_PLAY_S = 1.0, 5.0  # issue 49: rAF counted over 5 s after 1 s of play
+_ENGINE_TIMEOUTS = (MarionetteTimeout, MarionetteScriptTimeout, WebDriverTimeout, TimeoutError)
+
+
+def svg_engine_fps(session: Session, document: bytes, mode: str = "document", warm: float = ENGINE_WARM_S,
+                   seconds: float = ENGINE_PLAY_S, limit: float = 120.0) -> float | None:
+    """rAF fps of an SVG (mode "document": the file itself; "inline": in an HTML page) or an HTML page (mode
+    "page") in a tests/engines.py session; None when loading or playing takes over `limit` seconds (the page may
+    then still be busy: close the session)."""
+    suffix = {"document": ".svg", "inline": ".html", "page": ".html"}[mode]
+    if mode == "inline":
+        document = (PAGE % document.decode("utf-8")).encode("utf-8")
+    _session_timeouts(session, limit)
+    with tempfile.TemporaryDirectory(prefix="facesvg-fps-") as tmp:
+        path = Path(tmp) / f"played{suffix}"
+        path.write_bytes(document)
+        try:
+            return session_fps(session, path.as_uri(), warm, seconds)
+        except _ENGINE_TIMEOUTS:
+            return None
+
+
+def _session_timeouts(session: Session, seconds: float) -> None:
+    """The session's page-load and script timeouts (each protocol sets them its own way)."""
+    if isinstance(session, Firefox):
+        session.client.timeout.page_load = seconds
+        session.client.timeout.script = seconds
+    elif isinstance(session, WebKit):
+        session.driver.set_page_load_timeout(seconds)
+        session.driver.set_script_timeout(seconds)
 
 
 def _task_seconds(cdp, metric: str = "TaskDuration") -> float:
