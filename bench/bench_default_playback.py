@@ -47,6 +47,13 @@ VARIANTS: dict[str, dict] = {
     "mobile": {"preset": "mobile"},
     "player": {"to": "player"},
 }
+# The measured front of the default's colour tolerance (issue 49: where a target cannot be met), on the sample only
+# (the capture-like face's files are heavy at every point of it: one 1x cell each would add minutes, not a front).
+FRONT: dict[str, dict] = {
+    "colours within 16": {"color_tolerance": 16.0},
+    "colours within 32": {"color_tolerance": 32.0},
+    "static colours": {"color_tolerance": 255.0},
+}
 RUNS = {"default": 3, "mobile": 3}  # runs per cell (the median); other outputs and heavy files play once
 WARM_S, CHROMIUM_SECONDS = 1.0, 3.0
 LIMIT_S = 60.0  # per cell: a page that does not load and play by then is cut off
@@ -123,7 +130,7 @@ def convert_all(folder: Path) -> list[Output]:
         convert(sample_path(), ConversionOptions(**values))
     out: list[Output] = []
     for face, conversion in faces:
-        for name, values in VARIANTS.items():
+        for name, values in (VARIANTS | FRONT if face == "sample" else VARIANTS).items():
             options = ConversionOptions(**values)
             t = time.process_time()
             result = conversion(options)
