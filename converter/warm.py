@@ -30,6 +30,7 @@ WARM_JOBS = (  # the jobs whose kernels (or their argument types) differ; fap2d 
     ConversionOptions(shading="gouraud"),
     ConversionOptions(to="player"),  # its tracks are float64
     ConversionOptions(max_triangles=800),  # the triangle budget's (simplify.py)
+    ConversionOptions(exact=True),  # each path's own colour steps (encode/steps.py)
 )
 
 

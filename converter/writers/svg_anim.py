@@ -331,8 +331,10 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str =
     if sharing:
         shared = shared_colours.build(sheet.face_rgb, sheet.color_columns(tris), active, options.color_tolerance)
     if merging:
-        joined, tris, active, track, plan = _merge_plan(sheet, faces, tris, active, track, plan, options,
-                                                        None if shared is None else shared.entry)
+        # A merged element strokes all its subpaths: a path left unstroked (more than one outline edge) stays alone,
+        # else its stroke would grow the silhouette.
+        keys = None if shared is None else np.where(st.bare(tris), -1, shared.entry)
+        joined, tris, active, track, plan = _merge_plan(sheet, faces, tris, active, track, plan, options, keys)
         if shared is not None:
             shared = shared._replace(entry=shared.entry[joined.order])
         track = _stroke_merged(st, joined, tris, track)
@@ -465,7 +467,8 @@ def _merged_band(track: Tracks, active: np.ndarray, radius: np.ndarray, gain: np
     idx = np.array([[min(a + i, b - 1) for i in range(width)] for a, b in sets], np.int64)  # (Q, M) padded
     q = len(sets)
     joint_track = track.take(idx.ravel()).reshape(t, q, width * 6)
-    keys = freeknots.point_keys(joint_track, np.take(active, idx, axis=1).any(axis=2), radius[idx[:, 0]])
+    keys = freeknots.point_keys(joint_track, np.take(active, idx, axis=1).any(axis=2),
+                                 radius[idx].min(axis=1))  # the tightest bound of the set's paths
     members = np.concatenate([np.arange(a, b) for a, b in sets])
     set_of = np.repeat(np.arange(q), [b - a for a, b in sets])
     slot = members - np.repeat([a for a, _ in sets], [b - a for a, b in sets])
@@ -499,7 +502,7 @@ def _merged_band(track: Tracks, active: np.ndarray, radius: np.ndarray, gain: np
     whole = collapse.Timeline(np.concatenate(paths), np.concatenate(halves), np.concatenate(values),
                               np.concatenate(coll), np.concatenate(snaps).astype(np.int8))
     rows = np.rint(whole.values * scale).astype(np.int64)
-    kt_text, _ = timeline_key_times(whole, rows, t, gain[idx[:, 0]][whole.path] / scale, budget.keytimes)
+    kt_text, _ = timeline_key_times(whole, rows, t, gain[idx].max(axis=1)[whole.path] / scale, budget.keytimes)
     kb = np.searchsorted(whole.path, np.arange(q + 1))
     anims, firsts = [], []
     for k, (a, b) in enumerate(sets):
@@ -863,7 +866,10 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
         defs, rules, entry_names = _shared_colours(shared, t, dur, c_dec)
         for j in np.flatnonzero(c_vary).tolist():
             names[j], c_anims[j] = entry_names[shared.entry[j]], ""
-        style = style.replace("</style>", rules + "</style>")
+        # before the unstroked class, which must win over an entry's stroke (equal specificity: the later rule)
+        at = style.find(".n{stroke:none}")
+        at = at if at >= 0 else style.rindex("</style>")
+        style = style[:at] + rules + style[at:]
         report.counts["shared_color_animations"] = len(entry_names)
     if shared is not None:
         report.counts["palette_entries"] = shared.size

@@ -31,7 +31,7 @@ def test_rigid_output_verifies_and_is_smaller(anim, outputs):
     assert rigid.report.counts["rigid_groups"] >= 1
     v = verify.verify_animation(rigid.data, anim)
     assert v.ok, v.summary()
-    assert v.paths == rigid.report.counts["paths"]
+    assert rigid.report.counts["paths"] == rigid.data.count(b"<path ") <= v.paths  # a merged path draws several
     assert len(rigid.data) < 0.8 * len(plain.data)
 
 

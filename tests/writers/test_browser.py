@@ -24,7 +24,7 @@ def pyrender_flat(anim, sheet, k):
 
 # Mean colour difference to the exact still: exact colours (tolerance 3 levels) vs the default static colours
 # (one colour per triangle; the sample's shading changes by up to ~38 levels, 3.5 on average).
-COLOUR_CASES = {3.0: 2.0, 255.0: 6.0}  # exact colours (the default), static colours (the mobile preset)
+COLOUR_CASES = {3.0: 2.0, 8.0: 4.0, 255.0: 6.0}  # --exact, the default's shared colours, static colours (mobile)
 
 
 @pytest.mark.browser
@@ -35,7 +35,8 @@ def test_animated_frames_match_pyrender_and_the_still(browser, sample_path, arti
     anim = formats.load(sample_path).sliced(0, 48)
     sheet = extract.extract(anim, extract.fit_camera(anim, 192))
     size = sheet.camera.width
-    data = svg_anim.write(sheet, ConversionOptions(size=192, color_tolerance=color_tolerance), Report())
+    data = svg_anim.write(sheet, ConversionOptions(size=192, color_tolerance=color_tolerance,
+                                                   exact=color_tolerance == 3.0), Report())
     for k in (0, 17, 33, 47):
         played = chromium_frame(browser, data, k / anim.fps, size, size)
         still = svg_anim.write_still(sheet, ConversionOptions(size=192), Report(), k)

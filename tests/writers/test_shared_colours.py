@@ -85,7 +85,7 @@ def test_default_structure_elements_per_triangle_and_colour_animations_per_entry
     svg_anim.write(sheet, ConversionOptions(size=192, exact=True), exact)
     triangles = len(evaluate(data).triangles)
     paths = data.count(b"<path ")
-    assert paths == shared.counts["paths"] <= 0.6 * triangles  # merged
+    assert paths == shared.counts["paths"] <= 0.7 * triangles  # merged (unstroked paths stay alone)
     assert exact.counts["paths"] == triangles  # exact: one path per triangle
     assert shared.counts["color_animations"] == 0 and exact.counts["color_animations"] > 0
     gradients = data.count(b"<linearGradient")
@@ -119,3 +119,15 @@ def test_wider_colour_tolerance_fewer_entries_and_elements(sample):
         counts.append((r.counts["palette_entries"], r.counts["paths"]))
     assert counts[0][0] > counts[1][0] > counts[2][0]
     assert counts[0][1] >= counts[1][1] >= counts[2][1]
+
+
+def test_unstroked_paths_stay_unstroked_under_a_shared_colour(sample):
+    """`.n{stroke:none}` (paths with more than one outline edge, seams.py) must win over an entry's stroke paint:
+    with equal specificity the later rule wins, and a stroked outline fattened the robot's limbs (IoU 0.977 against
+    three.js)."""
+    _, sheet = sample
+    data = svg_anim.write(sheet, ConversionOptions(size=192), Report()).decode()
+    style = re.search(r"<style>(.*?)</style>", data).group(1)
+    assert re.search(r'class="p\d+ n"', data)  # the case exists
+    last_entry = max(m.end() for m in re.finditer(r"\.p\d+\{[^}]*\}", style))
+    assert style.index(".n{stroke:none}") >= last_entry
