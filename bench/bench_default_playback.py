@@ -32,12 +32,21 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from bench.capture_like import capture_like
-from bench.playback import ENGINE_PLAY_S, ENGINE_WARM_S, chromium, host_page, measure, serve, svg_engine_fps
+from bench.playback import (
+    ENGINE_PLAY_S,
+    ENGINE_WARM_S,
+    chromium,
+    host_page,
+    installed_engines,
+    measure,
+    serve,
+    svg_engine_fps,
+)
 from converter.bundled import sample_path
 from converter.convert import convert, convert_animation
 from converter.options import ConversionOptions
 from converter.playcost import HEAVY, playback_class
-from tests.engines import Session, firefox_path, launched_firefox, launched_webkit, webkit_paths
+from tests.engines import Session
 
 TITLE = "The default's fps in Chromium, Firefox ESR and WebKitGTK (issue 49)"
 # The outputs per face: ConversionOptions values.
@@ -216,15 +225,8 @@ def engine(launch: Callable[[], contextlib.AbstractContextManager[Session]]) -> 
 
 def play_engines(outputs: list[Output], loads: list[float]) -> list[str]:
     """Firefox ESR's and WebKitGTK's cells (unthrottled, as a document); notes on engines not installed."""
-    engines, notes = [], []
-    if firefox_path():
-        engines.append(("ff", lambda: launched_firefox(firefox_path())))
-    else:
-        notes.append("Firefox ESR is not installed: no Firefox cells.")
-    if webkit_paths():
-        engines.append(("wk", lambda: launched_webkit(*webkit_paths())))
-    else:
-        notes.append("WebKitGTK's WebKitWebDriver, MiniBrowser or Xvfb is missing: no WebKit cells.")
+    found, notes = installed_engines("cells")
+    engines = [({"Firefox ESR": "ff", "WebKitGTK": "wk"}[name], launch) for name, launch in found]
     for cell, launch in engines:
         with engine(launch) as e:
             for o in outputs:

@@ -24,7 +24,7 @@ for path in (ROOT, ROOT / "tests"):
     if str(path) not in sys.path:
         sys.path.insert(0, str(path))
 
-from bench.playback import chromium
+from bench.playback import chromium, installed_engines
 from converter import formats
 from converter.extract import extract, fit_camera
 from converter.options import ConversionOptions, Report
@@ -33,13 +33,9 @@ from engines import (
     SVG_OUTPUTS,
     colour_difference,
     distances,
-    firefox_path,
-    launched_firefox,
-    launched_webkit,
     over_white,
     player_frames,
     svg_frames,
-    webkit_paths,
 )
 from svgrender import chromium_frames, iou
 from tests.conftest import SAMPLE
@@ -74,15 +70,8 @@ def run() -> str:
         for kind, data in files.items():
             reference[kind], s = _timed(lambda data=data: chromium_frames(browser, data, times, SIZE, SIZE))
             chromium_s[kind] = s / len(times)
-    engines = []
-    if firefox_path():
-        engines.append(("Firefox ESR", lambda: launched_firefox(firefox_path())))
-    else:
-        notes.append("Firefox ESR is not installed: no Firefox rows.")
-    if webkit_paths():
-        engines.append(("WebKitGTK", lambda: launched_webkit(*webkit_paths())))
-    else:
-        notes.append("WebKitGTK's WebKitWebDriver, MiniBrowser or Xvfb is missing: no WebKit rows.")
+    engines, missing = installed_engines("rows")
+    notes += missing
     results: dict[tuple[str, str], str] = {}
     for name, launch in engines:
         t = time.perf_counter()

@@ -36,11 +36,11 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from bench.playback import chromium, host_page, measure, serve, session_fps
+from bench.playback import chromium, host_page, installed_engines, measure, serve, session_fps
 from converter.convert import convert
 from converter.options import ConversionOptions
 from tests.conftest import SAMPLE
-from tests.engines import colour_difference, firefox_path, launched_firefox, launched_webkit, webkit_paths
+from tests.engines import colour_difference
 
 TITLE = "Shared animated colours: which reference plays fastest (issue 49)"
 SVG = "http://www.w3.org/2000/svg"
@@ -358,15 +358,8 @@ def run() -> str:
                             fps[(c, v, col)] = got.fps_raf if got else None
                             changed[(c, v, col)] = got.fps_changed if got else 0.0
                         print(f"case {c} {col}: " + ", ".join(f"{v} {fps[(c, v, col)]}" for v in TIMED), flush=True)
-        engines = []
-        if firefox_path():
-            engines.append(("Firefox ESR", lambda: launched_firefox(firefox_path())))
-        else:
-            notes.append("Firefox ESR is not installed: no Firefox column.")
-        if webkit_paths():
-            engines.append(("WebKitGTK", lambda: launched_webkit(*webkit_paths())))
-        else:
-            notes.append("WebKitGTK's WebKitWebDriver, MiniBrowser or Xvfb is missing: no WebKit column.")
+        engines, missing = installed_engines()
+        notes += missing
         for name, launch in engines:
             with launch() as session:
                 for v in VARIANTS:

@@ -16,19 +16,20 @@ import sys
 import tempfile
 import time
 from collections import Counter, defaultdict
+from collections.abc import Iterator
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench.bench_weights import write_capture
+from bench.playback import installed_engines
 from converter.formats.morphs import load_morph_face
 from converter.formats.weights import read_weights
 from converter.options import ConversionOptions, Report
 from converter.puppet import from_track, puppet_of
 from converter.writers import puppet as writer
 from tests.conftest import chromium_path, launched_chromium
-from tests.engines import firefox_path, launched_firefox, launched_webkit, webkit_paths
 from tests.puppet.faces import face_zip
 from tests.reference import threejs
 
@@ -67,12 +68,12 @@ FPS_PAGE = "([warm, secs]) => new Promise((done) => {" + _FPS_BODY + "})"  # Pla
 FPS_SESSION = "const [warm, secs, done] = arguments;" + _FPS_BODY  # WebDriver / Marionette
 
 
-def draw_ms(pages: list[bytes]) -> list[tuple[float, float, str]]:
-    """(ms a frame unthrottled, at THROTTLE x, renderer) of each page in headless Chromium, or [] without it."""
+def _paused_pages(pages: list[bytes]) -> Iterator[object]:
+    """Each puppet page loaded paused in headless Chromium (a Playwright page, closed after its turn); nothing
+    without Chromium."""
     exe = chromium_path()
     if not exe:
-        return []
-    out = []
+        return
     with launched_chromium(exe) as browser, tempfile.TemporaryDirectory() as tmp:
         for k, data in enumerate(pages):
             path = Path(tmp) / f"p{k}.html"
@@ -80,13 +81,20 @@ def draw_ms(pages: list[bytes]) -> list[tuple[float, float, str]]:
             page = browser.new_page(viewport={"width": 1024, "height": 800})
             page.goto(path.as_uri() + "?paused")
             page.wait_for_function("() => document.documentElement.dataset.puppet", timeout=120000)
-            page.evaluate("() => puppet.pause()")
-            plain = page.evaluate(DRAW_LOOP, DRAWS)
-            cdp = page.context.new_cdp_session(page)
-            cdp.send("Emulation.setCPUThrottlingRate", {"rate": THROTTLE})
-            slow = page.evaluate(DRAW_LOOP, DRAWS)
-            out.append((plain, slow, page.evaluate("() => puppet.renderer")))
+            yield page
             page.close()
+
+
+def draw_ms(pages: list[bytes]) -> list[tuple[float, float, str]]:
+    """(ms a frame unthrottled, at THROTTLE x, renderer) of each page in headless Chromium, or [] without it."""
+    out = []
+    for page in _paused_pages(pages):
+        page.evaluate("() => puppet.pause()")
+        plain = page.evaluate(DRAW_LOOP, DRAWS)
+        cdp = page.context.new_cdp_session(page)
+        cdp.send("Emulation.setCPUThrottlingRate", {"rate": THROTTLE})
+        slow = page.evaluate(DRAW_LOOP, DRAWS)
+        out.append((plain, slow, page.evaluate("() => puppet.renderer")))
     return out
 
 
@@ -138,23 +146,13 @@ def _chromium_cpu() -> Counter:
 
 def cpu_ms(pages: list[bytes]) -> list[dict[str, float]]:
     """Per page, the CPU ms a frame of Chromium's threads (CPU_COLUMNS) drawing the take in FINISH_LOOP, or []."""
-    exe = chromium_path()
-    if not exe:
-        return []
     out = []
-    with launched_chromium(exe) as browser, tempfile.TemporaryDirectory() as tmp:
-        for k, data in enumerate(pages):
-            path = Path(tmp) / f"p{k}.html"
-            path.write_bytes(data)
-            page = browser.new_page(viewport={"width": 1024, "height": 800})
-            page.goto(path.as_uri() + "?paused")
-            page.wait_for_function("() => document.documentElement.dataset.puppet", timeout=120000)
-            page.evaluate(FINISH_LOOP, 20)
-            before = _chromium_cpu()
-            page.evaluate(FINISH_LOOP, CPU_FRAMES)
-            after = _chromium_cpu()
-            out.append({g: 1000 * (after[g] - before[g]) / CPU_FRAMES for g in CPU_COLUMNS})
-            page.close()
+    for page in _paused_pages(pages):
+        page.evaluate(FINISH_LOOP, 20)
+        before = _chromium_cpu()
+        page.evaluate(FINISH_LOOP, CPU_FRAMES)
+        after = _chromium_cpu()
+        out.append({g: 1000 * (after[g] - before[g]) / CPU_FRAMES for g in CPU_COLUMNS})
     return out
 
 
@@ -188,15 +186,7 @@ def chromium_fps(pages: list[bytes]) -> dict[str, list[tuple[float, float, str]]
 
 def engine_fps(pages: list[bytes]) -> tuple[dict[str, list[tuple[float, float, str]]], list[str]]:
     """Each playing page's fps in Firefox ESR and WebKitGTK (tests/engines.py), and notes on missing engines."""
-    engines, notes = [], []
-    if firefox_path():
-        engines.append(("Firefox ESR", lambda: launched_firefox(firefox_path())))
-    else:
-        notes.append("Firefox ESR is not installed: no Firefox column.")
-    if webkit_paths():
-        engines.append(("WebKitGTK", lambda: launched_webkit(*webkit_paths())))
-    else:
-        notes.append("WebKitGTK's WebKitWebDriver, MiniBrowser or Xvfb is missing: no WebKit column.")
+    engines, notes = installed_engines()
     out: dict[str, list[tuple[float, float, str]]] = {}
     for name, launch in engines:
         with launch() as session:

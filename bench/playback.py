@@ -14,8 +14,8 @@ import http.server
 import tempfile
 import threading
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
 from typing import NamedTuple
 
@@ -26,9 +26,25 @@ from playwright.sync_api import TimeoutError as PlaywrightTimeout
 from selenium.common.exceptions import TimeoutException as WebDriverTimeout
 
 from tests.conftest import chromium_path, launched_chromium
-from tests.engines import PAGE, Firefox, Session, WebKit
+from tests.engines import PAGE, Firefox, Session, WebKit, firefox_path, launched_firefox, launched_webkit, webkit_paths
 
 THROTTLES = (1, 4, 6)  # CDP CPU throttling rates: a desktop, a mid-range phone, a low-end phone
+
+
+def installed_engines(unit: str = "column") -> tuple[list[tuple[str, Callable[[], AbstractContextManager[Session]]]],
+                                                       list[str]]:
+    """Firefox ESR and WebKitGTK, each (name, a launcher of its tests/engines.py session) where installed, and a
+    note for each one missing (its table loses that unit: "column", "rows", ...)."""
+    engines, notes = [], []
+    if firefox_path():
+        engines.append(("Firefox ESR", lambda: launched_firefox(firefox_path())))
+    else:
+        notes.append(f"Firefox ESR is not installed: no Firefox {unit}.")
+    if webkit_paths():
+        engines.append(("WebKitGTK", lambda: launched_webkit(*webkit_paths())))
+    else:
+        notes.append(f"WebKitGTK's WebKitWebDriver, MiniBrowser or Xvfb is missing: no WebKit {unit}.")
+    return engines, notes
 
 
 class Playback(NamedTuple):
