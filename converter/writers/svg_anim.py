@@ -59,7 +59,6 @@ STROKE_PX = 0.6
 STATIC_LEVELS = 255.0  # a colour tolerance this wide keeps every colour static: no animated palette
 SHARED_SET_SIZE = 8  # most triangles in one path of one shared colour by default: larger sets save few elements
 # more and cost bytes, since a set's subpaths are keyed together (bench_default_playback)
-SHARED_REFERENCE = "gradient"  # how a path refers to its animated palette entry: "gradient", "css" or "own"
 BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime): what groups weigh
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
 UNIFORM_VALUES = 1 << 23  # float64 track values fitted at once (64 MB: 4,000 frames x 349 paths)
@@ -404,36 +403,27 @@ def _stroke_merged(st: Strokes, joined: merge.Merge, tris: np.ndarray, track: Tr
 
 
 def _shared_colours(shared: shared_colours.Palette, t: int, dur: str, decimals: int) -> tuple[str, str, dict[int, str]]:
-    """The animated entries of a shared palette as SHARED_REFERENCE says: the <defs> (one-stop gradients whose
-    stop colour animates; '' for CSS), the CSS rules (a class per entry: its fill and stroke paint, or its
-    keyframes) and each animated entry's class name, numbered by first use."""
+    """The animated entries of a shared palette that paths use: the <defs> (a one-stop userSpaceOnUse gradient per
+    entry whose stop colour animates, discrete; bench_palette_refs measured the references), the CSS rules (a class
+    per entry painting fill and stroke with it) and each entry's class name, numbered by first use."""
     live = np.flatnonzero(shared.animated())
     used = np.zeros(shared.size, bool)
     used[shared.entry[shared.entry >= 0]] = True
     live = live[used[live]]
     names = {int(k): f"p{i}" for i, k in enumerate(live.tolist())}
-    mask = shared.mask[:, live]
-    epk, efk = np.nonzero(mask.T)
+    epk, efk = np.nonzero(shared.mask[:, live].T)
     hexes = _hex(shared.values[:, live].transpose(1, 0, 2)[epk, efk]).tolist()
     bounds = np.searchsorted(epk, np.arange(len(live) + 1)).tolist()
+    kt = key_times(efk, t, decimals, "early")
     defs, rules = [], []
-    if SHARED_REFERENCE == "gradient":
-        kt = key_times(efk, t, decimals, "early")
-        for i in range(len(live)):
-            a, b = bounds[i], bounds[i + 1]
-            defs.append(f'<linearGradient id="p{i}" gradientUnits="userSpaceOnUse"><stop stop-color="{hexes[a]}">'
-                        f'<animate attributeName="stop-color" calcMode="discrete" dur="{dur}" '
-                        f'repeatCount="indefinite" keyTimes="{";".join(kt[a:b])}" values="{";".join(hexes[a:b])}"/>'
-                        "</stop></linearGradient>")
-            rules.append(f".p{i}{{fill:url(#p{i});stroke:url(#p{i})}}")
-        return "<defs>" + "".join(defs) + "</defs>", "".join(rules), names
-    q = 10 ** decimals  # CSS keyframes, held (step-end): the SMIL keyTimes' grid, in percent
-    pct = svgtext.numbers(np.rint(np.maximum(efk - 0.5, 0.0) * q / t) * (100 / q), max(decimals - 2, 0))
     for i in range(len(live)):
         a, b = bounds[i], bounds[i + 1]
-        frames = "".join(f"{pct[j]}%{{color:{hexes[j]}}}" for j in range(a, b))
-        rules.append(f".p{i}{{color:{hexes[a]};animation:k{i} {dur} step-end infinite}}@keyframes k{i}{{{frames}}}")
-    return "", "".join(rules), names
+        defs.append(f'<linearGradient id="p{i}" gradientUnits="userSpaceOnUse"><stop stop-color="{hexes[a]}">'
+                    f'<animate attributeName="stop-color" calcMode="discrete" dur="{dur}" '
+                    f'repeatCount="indefinite" keyTimes="{";".join(kt[a:b])}" values="{";".join(hexes[a:b])}"/>'
+                    "</stop></linearGradient>")
+        rules.append(f".p{i}{{fill:url(#p{i});stroke:url(#p{i})}}")
+    return "<defs>" + "".join(defs) + "</defs>", "".join(rules), names
 
 
 def _merged_geometry(track: Tracks, active: np.ndarray, radius: np.ndarray, gain: np.ndarray,
@@ -830,27 +820,31 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     del track
     # Colour: held steps within the colour tolerance (color_steps); the first step's colour is the path's class.
     columns = sheet.color_columns(tris)
-    if shared is not None:  # every path plays its palette entry's steps
-        ckeys = keyframes.Keys(shared.mask[:, shared.entry], shared.values[:, shared.entry],
-                               np.where(active.any(axis=0), np.argmax(active, axis=0), -1))
-    else:
-        ckeys = color_steps(sheet.face_rgb, active, color_tol, columns)  # as stored: no (T, P, 3) copy
-    progress("text", 0.8)
-    if sets and shared is None:  # a merged path's one static colour (its code's)
-        ckeys.mask[:, inside] = False
-        ckeys.mask[0, inside] = True
-        ckeys.values[0, inside] = joined.levels[inside]
-    cpk, cfk = np.nonzero(ckeys.mask.T)
-    crow = ckeys.values.transpose(1, 0, 2)[cpk, cfk].astype(np.int64)
-    c_vary = _varying(cpk, p, crow)
     # A step shows from frame k: placed half a frame early, rounded by at most a quarter frame.
     c_dec = math.ceil(math.log10(2 * max(t, 1)))
-    c_anims, _, n_color_keys = _keyed("color", cpk, p, _hex(crow).tolist(), key_times(cfk, t, c_dec, "early"),
-                                      dur, c_vary, discrete=True)
+    if shared is not None:  # every path refers to its palette entry: per path only its frame-0 colour and class
+        c_vary = shared.animated()[shared.entry]
+        c_anims = [""] * p
+        n_color_keys = int(np.where(c_vary, shared.mask.sum(axis=0)[shared.entry], 1).sum())
+        first = shared.values[0, shared.entry].astype(np.int64)  # frame 0 is every entry's first step
+        base = (first[:, 0] << 16) | (first[:, 1] << 8) | first[:, 2]
+        progress("text", 0.8)
+    else:
+        ckeys = color_steps(sheet.face_rgb, active, color_tol, columns)  # as stored: no (T, P, 3) copy
+        progress("text", 0.8)
+        if sets:  # a merged path's one static colour (its code's)
+            ckeys.mask[:, inside] = False
+            ckeys.mask[0, inside] = True
+            ckeys.values[0, inside] = joined.levels[inside]
+        cpk, cfk = np.nonzero(ckeys.mask.T)
+        crow = ckeys.values.transpose(1, 0, 2)[cpk, cfk].astype(np.int64)
+        c_vary = _varying(cpk, p, crow)
+        c_anims, _, n_color_keys = _keyed("color", cpk, p, _hex(crow).tolist(), key_times(cfk, t, c_dec, "early"),
+                                          dur, c_vary, discrete=True)
+        cbounds = np.searchsorted(cpk, np.arange(p + 1))[:-1]
+        packed = (crow[:, 0] << 16) | (crow[:, 1] << 8) | crow[:, 2]
+        base = packed[np.minimum(cbounds, max(len(packed) - 1, 0))] if len(packed) else np.zeros(p, np.int64)
     n_uniform = len(d_uniform)
-    cbounds = np.searchsorted(cpk, np.arange(p + 1))[:-1]
-    packed = (crow[:, 0] << 16) | (crow[:, 1] << 8) | crow[:, 2]
-    base = packed[np.minimum(cbounds, max(len(packed) - 1, 0))] if len(packed) else np.zeros(p, np.int64)
     values, counts = np.unique(base, return_counts=True)
     rank = np.lexsort((values, -counts))  # the most used colour gets the shortest class name
     remap = np.empty(len(values), np.int64)
@@ -862,16 +856,15 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     style = _style(palette, view_scale, bool(bare.any()))
     names = [f"c{c}" for c in cls.tolist()]
     defs = ""
-    if shared is not None and SHARED_REFERENCE != "own":  # each animated entry animates once; its paths refer
+    if shared is not None:  # each animated entry animates once; its paths refer to it
         defs, rules, entry_names = _shared_colours(shared, t, dur, c_dec)
         for j in np.flatnonzero(c_vary).tolist():
-            names[j], c_anims[j] = entry_names[shared.entry[j]], ""
+            names[j] = entry_names[shared.entry[j]]
         # before the unstroked class, which must win over an entry's stroke (equal specificity: the later rule)
         at = style.find(".n{stroke:none}")
         at = at if at >= 0 else style.rindex("</style>")
         style = style[:at] + rules + style[at:]
         report.counts["shared_color_animations"] = len(entry_names)
-    if shared is not None:
         report.counts["palette_entries"] = shared.size
     out = [style, *([defs] if defs else []), group_open(plan.head, t, dur) if plan is not None else "<g>"]
     ids = path_ids(tris)
