@@ -12,7 +12,6 @@ renderer, which draws the triangles as they are (it grew each by 0.25 px before:
 from __future__ import annotations
 
 import functools
-import os
 import re
 from pathlib import Path
 
@@ -43,11 +42,7 @@ REAL = SHARED_DATA / "real"
 @pytest.fixture(scope="module")
 def player(browser):
     """The browser, once three.js is installed (skips locally without it, fails when CI is set)."""
-    why = threejs.missing()
-    if why:
-        if os.environ.get("CI"):
-            pytest.fail(f"{why}, but CI is set: `make setup` must run npm ci")
-        pytest.skip(why)
+    threejs.require()
     return browser
 
 

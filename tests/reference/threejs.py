@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pytest
 from lxml import etree
 from PIL import Image
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
@@ -52,6 +53,16 @@ def missing() -> str | None:
             return "node/npm not installed (apt-get install nodejs npm), so three.js is missing"
         return f"three.js not installed: run `npm ci` in {HERE}"
     return None
+
+
+def require() -> None:
+    """Skip the calling test where three.js cannot run (missing()); fail instead when CI is set (`make setup` runs
+    npm ci)."""
+    why = missing()
+    if why:
+        if os.environ.get("CI"):
+            pytest.fail(f"{why}, but CI is set: `make setup` must run npm ci")
+        pytest.skip(why)
 
 
 def three_version() -> str:
