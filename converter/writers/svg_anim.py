@@ -35,30 +35,23 @@ import numpy as np
 
 from converter import heap, playcost
 from converter.arrays import lengths, lexsort_ints
-from converter.encode import collapse, freeknots, groups, merge
+from converter.encode import collapse, flatplan, groups
 from converter.encode import keys as keyframes
 from converter.encode import palette as shared_colours
 from converter.encode.budget import ErrorBudget, viewbox_scale
-from converter.encode.colours import color_error, color_steps
-from converter.encode.order import draw_list
+from converter.encode.colours import color_error
+from converter.encode.flatplan import SHARED_SET_SIZE, STATIC_LEVELS, STROKE_PX, Strokes, strokes  # noqa: F401
 from converter.encode.tracks import Tracks, blocks
 from converter.errors import InputError
 from converter.options import ConversionOptions, Progress, Report, no_progress, span
 from converter.sheet import Sheet
-from converter.writers import seams, svgtext
+from converter.writers import svgtext
 from converter.writers.metadata import source_fields
 from converter.writers.svg_transforms import CLOSE, group_open
 from converter.writers.svgtext import key_times
 from converter.writers.svgtext import number as svg_number
 
 FORMAT_VERSION = 2
-# Stroke of the fill colour over interior edges (seams.py): hides the anti-aliasing seams between neighbours. One
-# side strokes a shared edge, so it is wider than the 0.5 px both sides drew when every edge was stroked: the egg
-# of tests/writers/test_seams.py shows less page through its seams than then, and outlines do not grow.
-STROKE_PX = 0.6
-STATIC_LEVELS = 255.0  # a colour tolerance this wide keeps every colour static: no animated palette
-SHARED_SET_SIZE = 8  # most triangles in one path of one shared colour by default: larger sets save few elements
-# more and cost bytes, since a set's subpaths are keyed together (bench_default_playback)
 BYTES_PER_KEY = 24  # typical text of one path key ("M12 -34l5 6 -7 8z;" plus its keyTime): what groups weigh
 UNIFORM_ROUNDS = (1.0, 1.5, 2.2)  # evenly spaced keys tried at these multiples of the greedy key count
 UNIFORM_VALUES = 1 << 23  # float64 track values fitted at once (64 MB: 4,000 frames x 349 paths)
@@ -139,55 +132,6 @@ def _style(palette: np.ndarray, scale: int, bare: bool = False) -> str:
     sw = svg_number(STROKE_PX * scale, 3)
     return (f"<style>path{{fill:currentColor;stroke:currentColor;stroke-width:{sw};stroke-linejoin:round;"
             f"stroke-linecap:round}}{rules}{'.n{stroke:none}' if bare else ''}</style>")
-
-
-class Strokes:
-    """The seam strokes of a writer's paths (seams.py), looked up by triangle id: each triangle is drawn by one
-    path (layer copies are never left open), so its corner order, 'z' and stroke follow it through every
-    reordering of the paths."""
-
-    def __init__(self, faces: np.ndarray, tris: np.ndarray, skip: np.ndarray, single: np.ndarray) -> None:
-        n = len(faces)
-        self.faces = np.array(faces, np.int32)
-        self.start_of = np.zeros((2, n), np.int64)  # as laid out, and with a stroke (at most one edge out)
-        self.closed_of = np.ones((2, n), bool)
-        self.bare_of = np.zeros(n, bool)
-        for k, s in enumerate((seams.layout(skip), seams.layout(single))):
-            self.start_of[k, tris], self.closed_of[k, tris] = s.start, s.closed
-            if k == 0:
-                self.bare_of[tris] = ~s.stroked
-        rows = np.take_along_axis(self.faces[tris], (self.start_of[0, tris, None] + np.arange(3)) % 3, axis=1)
-        self.faces[tris] = rows  # each path's corners from the one written first: its skipped edge closes it
-
-    def closed(self, tris: np.ndarray) -> np.ndarray:
-        """Bool per path of triangles tris: its d ends with 'z'."""
-        return self.closed_of[0, tris]
-
-    def bare(self, tris: np.ndarray) -> np.ndarray:
-        """Bool per path of triangles tris: it has no stroke."""
-        return self.bare_of[tris]
-
-    def stroke(self, tris: np.ndarray) -> np.ndarray:
-        """Give the unstroked of triangles tris a stroke (a merged element has one for all its subpaths): returns
-        per triangle the turn (0-2) its corners take from the order laid out before."""
-        tris = np.asarray(tris)
-        turn = (self.start_of[1, tris] - self.start_of[0, tris]) % 3
-        self.faces[tris] = np.take_along_axis(self.faces[tris], (turn[:, None] + np.arange(3)) % 3, axis=1)
-        self.start_of[0, tris], self.closed_of[0, tris] = self.start_of[1, tris], self.closed_of[1, tris]
-        self.bare_of[tris] = False
-        return turn
-
-
-def strokes(sheet: Sheet, tris: np.ndarray, active: np.ndarray, frames: slice = slice(None)) -> Strokes:
-    """The seam strokes of paths drawing triangles tris where active (T, P) over the sheet's frames (a slice of
-    them for a still)."""
-    welded = seams.welded_ids(sheet.xy[frames], sheet.depth[frames])
-    skip, single = seams.skips(welded[sheet.faces[tris]], active, sheet.xy[frames], sheet.faces[tris], STROKE_PX / 2)
-    tris = np.asarray(tris)
-    _, first, counts = np.unique(tris, return_index=True, return_counts=True)
-    copies = np.isin(tris, tris[first[counts > 1]])  # layer copies: closed and stroked, as before
-    skip[copies] = single[copies] = False
-    return Strokes(sheet.faces, tris, skip, single)
 
 
 def write_still(sheet: Sheet, options: ConversionOptions, report: Report, frame: int) -> bytes:
@@ -294,112 +238,38 @@ def _discrete(attribute: str, codes: np.ndarray, names: list[str], kt: list[str]
 def encode(sheet: Sheet, options: ConversionOptions, report: Report, mode: str = "bounded",
            progress: Progress = no_progress) -> bytes:
     """The animated SVG in one of the encodings: 'raw', 'chapter' or 'bounded' (module docstring); progress(stage,
-    fraction of the writing done) as it goes (the keys up to KEYS_DONE, then the text)."""
+    fraction of the writing done) as it goes (the plan's keys up to KEYS_DONE, then the text)."""
     t = sheet.n_frames
     progress("order", 0.0)
-    dl = draw_list(sheet, layers=options.depth_layers)
-    tris, active = dl.triangles, dl.active
-    shown = active.any(axis=0)  # a path never shown is dropped
-    tris, active = tris[shown], np.compress(shown, active, axis=1)
-    p = len(tris)
     dur = f"{sheet.duration:.6f}".rstrip("0").rstrip(".") + "s"  # SMIL clock values need the leading digit
     extra: dict = {"encoding": {"mode": mode}}
+    costs = groups.Costs(lambda m: len(group_open(m, t, dur)), len(CLOSE), BYTES_PER_KEY)
+    fp = flatplan.plan(sheet, options, mode, costs, span(progress, ORDER_DONE, KEYS_DONE))
     if mode == "bounded":  # the raw file's d values alone, counted exactly (writing them would cost more)
-        report.sizes["raw_d_values"] = raw_values_bytes(sheet.xy, sheet.faces[tris])
-    budget = ErrorBudget.split(options.tolerance, max(sheet.camera.width, sheet.camera.height))
-    sharing = mode == "bounded" and not options.exact and options.color_tolerance < STATIC_LEVELS and p > 0
-    merging = mode == "bounded" and (sharing or (options.max_animations is not None and p > options.max_animations))
-    st = strokes(sheet, tris, active)
-    faces = st.faces  # each path's corners from the one its d starts at
-    plan = None
-    keys_from = ORDER_DONE  # progress of the writing where the plain keys start, when they are worked out
-    if mode == "bounded" and options.rigid and p:
-        costs = groups.Costs(lambda m: len(group_open(m, t, dur)), len(CLOSE), BYTES_PER_KEY)
-        plan = groups.plan(sheet.xy, faces, sheet.part_ids, sheet.neutral, tris, active, budget, costs,
-                           progress=span(progress, ORDER_DONE, KEYS_DONE))
-        heap.give_back()  # the plan's temporaries, before the text's
-        if plan.head is not None:  # else nothing pays for a group: the plain encoding, byte for byte
-            tris, active, track = tris[plan.order], np.take(active, plan.order, axis=1), plan.track
-        else:  # the plan stopped before its refining: the plain keys take that part of the progress
-            plan = None
-            keys_from = ORDER_DONE + (KEYS_DONE - ORDER_DONE) * groups.PLAN_SHARES[1]
-    if plan is None:  # the Sheet's float32 vertices, read a block of paths at a time
-        track = Tracks.screen(sheet.xy, faces[tris])
-    joined = None
-    shared = None  # the animated palette every path refers to (converter.encode.palette), unless exact
-    if sharing:
-        shared = shared_colours.build(sheet.face_rgb, sheet.color_columns(tris), active, options.color_tolerance)
-    if merging:
-        # A merged element strokes all its subpaths: a path left unstroked (more than one outline edge) stays alone,
-        # else its stroke would grow the silhouette.
-        keys = None if shared is None else np.where(st.bare(tris), -1, shared.entry)
-        joined, tris, active, track, plan = _merge_plan(sheet, faces, tris, active, track, plan, options, keys)
-        if shared is not None:
-            shared = shared._replace(entry=shared.entry[joined.order])
-        track = _stroke_merged(st, joined, tris, track)
+        report.sizes["raw_d_values"] = raw_values_bytes(sheet.xy, sheet.faces[fp.tris])
+    p = fp.n_paths
     if mode in ("raw", "chapter"):
-        body = _encode_raw(sheet, tris, active, track, dur, chapter=mode == "chapter", strokes=st,
+        body = _encode_raw(sheet, fp.tris, fp.active, fp.track, dur, chapter=mode == "chapter", strokes=fp.strokes,
                            progress=span(progress, ORDER_DONE, 1.0))
         scale = 1
     else:
-        owned = [track, _timeline(track, active, budget, plan, span(progress, keys_from, KEYS_DONE))]
-        del track  # _encode_keyed lets the track go once the geometry is written
-        if plan is not None:  # its keys live on only in the timeline, its track in owned
-            plan = plan._replace(timeline=None, track=None)
-        body, scale, enc = _encode_keyed(sheet, budget, tris, active, owned, dur, report, st, plan,
-                                         options.color_tolerance, joined, span(progress, KEYS_DONE, 1.0, "text"),
-                                         shared)
+        body, scale, enc = _encode_keyed(sheet, fp, dur, report, options.color_tolerance,
+                                         span(progress, KEYS_DONE, 1.0, "text"))
         extra["encoding"].update(enc)
+    tris = fp.tris
     head = [_header(sheet, scale), metadata(sheet, options, report, extra, order=tris),
             f"<title>{escape(sheet.name)}</title>"]
-    report.counts["paths"] = p if joined is None else len(joined.starts) - 1
+    report.counts["paths"] = p if fp.joined is None else len(fp.joined.starts) - 1
     if mode == "bounded":
         report.figures["playback_ms_4x"] = playcost.predict_ms(report.counts)
-    report.counts["depth_conflicts"] = dl.conflicts
-    report.counts["depth_conflicts_left"] = dl.residual
+    report.counts["depth_conflicts"] = fp.conflicts
+    report.counts["depth_conflicts_left"] = fp.residual
     report.counts["layer_copies"] = int(len(tris) - len(np.unique(tris)))
     if mode in ("raw", "chapter"):  # already bytes, a block of paths each: joined once, never as one str
         return b"\n".join(["\n".join(head).encode("utf-8"), *body, b"</g></svg>\n"])
     text = "\n".join([*head, *body, "</g></svg>\n"])
     del body  # the document's text alone, then its bytes
     return text.encode("utf-8")
-
-
-def _merge_plan(sheet: Sheet, faces: np.ndarray, tris: np.ndarray, active: np.ndarray, track: Tracks,
-                plan: groups.Plan | None, options: ConversionOptions, entries: np.ndarray | None = None):
-    """converter.encode.merge's sets for the paths (triangles tris of faces; by palette entry where entries),
-    and the paths, their tracks and the plan in its order."""
-    segment = np.zeros(len(tris), np.int64)
-    if plan is not None:  # a set never crosses the edge of a group
-        edge = np.zeros(len(tris) + 1, np.int64)
-        edge[plan.groups.ravel()] = 1
-        segment = np.cumsum(edge[:-1])
-    joined = merge.plan(segment, None if entries is not None else sheet.face_colors(tris), active,
-                        options.color_tolerance, np.take(sheet.xy, faces[tris], axis=1),
-                        options.max_animations or 0, entries,
-                        SHARED_SET_SIZE if entries is not None and options.max_animations is None else None)
-    o = joined.order
-    if plan is not None:
-        plan = plan._replace(track=plan.track.reorder(o), radius=plan.radius[o], band=plan.band[o],
-                             gain=plan.gain[o], timeline=collapse.take_paths(plan.timeline, o))
-        track = plan.track
-    else:
-        track = track.reorder(o)
-    return joined, tris[o], np.take(active, o, axis=1), track, plan
-
-
-def _stroke_merged(st: Strokes, joined: merge.Merge, tris: np.ndarray, track: Tracks) -> Tracks:
-    """An element of several subpaths has one stroke: its unstroked paths (st) get one (their corners turned so
-    the one edge they leave out closes them), in track as well (the merged keys are worked out from it)."""
-    counts = np.diff(joined.starts)
-    inside = np.flatnonzero(np.repeat(counts > 1, counts))
-    fix = inside[st.bare(tris[inside])]
-    if not len(fix):
-        return track
-    turn = st.stroke(tris[fix])
-    corners = np.array(track.corners)
-    corners[fix] = np.take_along_axis(corners[fix], (turn[:, None] + np.arange(3)) % 3, axis=1)
-    return Tracks(track.verts, corners)
 
 
 def _shared_colours(shared: shared_colours.Palette, t: int, dur: str, decimals: int) -> tuple[str, str, dict[int, str]]:
@@ -426,71 +296,27 @@ def _shared_colours(shared: shared_colours.Palette, t: int, dur: str, decimals: 
     return "<defs>" + "".join(defs) + "</defs>", "".join(rules), names
 
 
-def _merged_geometry(track: Tracks, active: np.ndarray, radius: np.ndarray, gain: np.ndarray,
-                     sets: list[tuple[int, int]], budget: ErrorBudget, dur: str,
-                     closed: np.ndarray | None = None) -> tuple[list[str], list[str], int]:
-    """Per merged set (first, one-past-last path) its <animate> of d and frame-0 d: one subpath per path, every
-    point keyed together (free knots within the set's radius wherever any of its paths shows), each path
-    collapsed where it hides; a path's values at the keys the others add lie on its own interpolant, so every
-    shown frame keeps the bound. Sets are keyed in bands of sizes (2, 3-4, 5-8, ...), each padded to its
-    largest: one width for all wasted ten times the work and memory on a few large sets among many small."""
+def _merged_geometry(bands: list[flatplan.MergedBand], sets: list[tuple[int, int]], gain: np.ndarray,
+                     budget: ErrorBudget, t: int, dur: str, closed: np.ndarray) -> tuple[list[str], list[str], int]:
+    """Per merged set (first, one-past-last path) its <animate> of d and frame-0 d from its joint keys
+    (flatplan.merged_keys) over t frames: one subpath per path; gain (P,): error gain of each path's group; closed
+    (P,): a path's subpath ends with 'z' (else it is open)."""
     anims, firsts, n_keys = [""] * len(sets), [""] * len(sets), 0
-    band = np.ceil(np.log2([b - a for a, b in sets])).astype(np.int64)
-    for w in np.unique(band).tolist():
-        ks = np.flatnonzero(band == w)
-        a_, f_, n = _merged_band(track, active, radius, gain, [sets[k] for k in ks.tolist()], budget, dur, closed)
-        for k, a, f in zip(ks.tolist(), a_, f_):
+    for band in bands:
+        a_, f_, n = _merged_band(band, [sets[k] for k in band.sets.tolist()], gain, budget, t, dur, closed)
+        for k, a, f in zip(band.sets.tolist(), a_, f_):
             anims[k], firsts[k] = a, f
         n_keys += n
     return anims, firsts, n_keys
 
 
-def _merged_band(track: Tracks, active: np.ndarray, radius: np.ndarray, gain: np.ndarray,
-                 sets: list[tuple[int, int]], budget: ErrorBudget, dur: str,
-                 closed: np.ndarray | None = None) -> tuple[list[str], list[str], int]:
-    """_merged_geometry of sets keyed together, each padded to the largest (its last path repeated: the same
-    bound twice, no other key); closed (P,): a path's subpath ends with 'z' (else it is open; default: all closed)."""
-    t = active.shape[0]
-    closed = np.ones(active.shape[1], bool) if closed is None else closed
+def _merged_band(band: flatplan.MergedBand, sets: list[tuple[int, int]], gain: np.ndarray, budget: ErrorBudget,
+                 t: int, dur: str, closed: np.ndarray) -> tuple[list[str], list[str], int]:
+    """_merged_geometry of one band's sets: their animations, frame-0 d texts and keys written."""
+    whole, q = band.timeline, len(sets)
     scale = budget.scale
-    width = max(b - a for a, b in sets)
+    width = band.width
     idx = np.array([[min(a + i, b - 1) for i in range(width)] for a, b in sets], np.int64)  # (Q, M) padded
-    q = len(sets)
-    joint_track = track.take(idx.ravel()).reshape(t, q, width * 6)
-    keys = freeknots.point_keys(joint_track, np.take(active, idx, axis=1).any(axis=2),
-                                 radius[idx].min(axis=1))  # the tightest bound of the set's paths
-    members = np.concatenate([np.arange(a, b) for a, b in sets])
-    set_of = np.repeat(np.arange(q), [b - a for a, b in sets])
-    slot = members - np.repeat([a for a, _ in sets], [b - a for a, b in sets])
-    vals = np.take(keys.values.reshape(t + 1, q * width, 6), set_of * width + slot, axis=1)
-    mk = keyframes.Keys(np.take(keys.mask, set_of, axis=1), vals, keys.first_active[set_of])
-    tl = collapse.fold(mk, np.take(active, members, axis=1))
-    bounds = np.searchsorted(tl.path, np.arange(len(members) + 1))
-    paths, halves, values, coll, snaps = [], [], [], [], []
-    first = 0
-    for k, (a, b) in enumerate(sets):
-        n = b - a
-        lo, hi = bounds[first], bounds[first + n]
-        h = np.unique(tl.half[lo:hi])
-        v = np.empty((len(h), width, 6))
-        for i in range(n):  # each path on its own interpolant at every key of the set
-            s0, s1 = bounds[first + i], bounds[first + i + 1]
-            for c in range(6):
-                v[:, i, c] = np.interp(h, tl.half[s0:s1], tl.values[s0:s1, c])
-        v[:, n:] = v[:, n - 1:n]
-        pts = v.reshape(len(h), width, 3, 2)
-        point = (pts == pts[:, :, :1]).all(axis=(2, 3))  # (K, M) the path is collapsed at the key
-        s = collapse.snaps(point, np.ones((len(h) - 1, 1), bool))
-        worst = np.where((s == -2).any(axis=1) | ((s == -1).any(axis=1) & (s == 1).any(axis=1)), -2,
-                         np.where((s == -1).any(axis=1), -1, np.where((s == 1).any(axis=1), 1, 0)))
-        paths.append(np.full(len(h), k))
-        halves.append(h)
-        values.append(v.reshape(len(h), width * 6))
-        coll.append(point.all(axis=1))
-        snaps.append(worst)
-        first += n
-    whole = collapse.Timeline(np.concatenate(paths), np.concatenate(halves), np.concatenate(values),
-                              np.concatenate(coll), np.concatenate(snaps).astype(np.int8))
     rows = np.rint(whole.values * scale).astype(np.int64)
     kt_text, _ = timeline_key_times(whole, rows, t, gain[idx].max(axis=1)[whole.path] / scale, budget.keytimes)
     kb = np.searchsorted(whole.path, np.arange(q + 1))
@@ -708,26 +534,6 @@ def timeline_key_times(tl: collapse.Timeline, rows: np.ndarray, t: int, px: floa
     return out.tolist(), decimals
 
 
-def _radius(budget: ErrorBudget, plan: groups.Plan | None) -> tuple[float | np.ndarray, float | np.ndarray]:
-    """Euclidean px left for keyframing and the bound an exactly checked fit may use, per path under a plan
-    (local px, scaled down by the error gain of the path's group transform)."""
-    if plan is None:
-        return budget.keys, budget.fit_bound
-    return plan.radius, budget.fit_bound / plan.gain
-
-
-def _timeline(track: Tracks, active: np.ndarray, budget: ErrorBudget,
-              plan: groups.Plan | None, progress: Progress = no_progress) -> collapse.Timeline:
-    """The paths' keys within the budget, hidden frames collapsed (collapse.py): the plan's, which it worked out
-    to decide its groups, else free knots now, a block of paths at a time."""
-    if plan is not None:
-        return plan.timeline
-    radius = np.broadcast_to(np.asarray(_radius(budget, plan)[0], np.float64), (track.shape[1],))
-    return collapse.fold_blocks(active, lambda a, b: freeknots.point_keys(track.take(slice(a, b)), active[:, a:b],
-                                                                          radius[a:b]),
-                                freeknots.block_tracks(active.shape[0]), progress)
-
-
 def _d_animations(tl: collapse.Timeline, p: int, t: int, gain: np.ndarray | None, view_scale: int,
                   time_budget: float, dur: str, closed: np.ndarray) -> tuple[list[str], list[str], int, np.ndarray,
                                                                              np.ndarray, np.ndarray, np.ndarray,
@@ -771,24 +577,21 @@ def _d_animations(tl: collapse.Timeline, p: int, t: int, gain: np.ndarray | None
     return anims, firsts, n_keys, moving, off, counts, per_key, [min(lows), max(highs)] if lows else []
 
 
-def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: np.ndarray, owned: list,
-                  dur: str, report: Report, st: Strokes, plan: groups.Plan | None = None,
-                  color_tolerance: float = 3.0, joined: merge.Merge | None = None,
-                  progress: Progress = no_progress, shared: shared_colours.Palette | None = None
-                  ) -> tuple[list[str], int, dict]:
-    """The error-bounded integer encoding (module docstring) of the paths' tracks (encode.tracks) and their keys
-    (collapse.Timeline) within budget, handed over as owned = [track, timeline] (emptied here, so that each is
-    freed as soon as it is used: on a long capture they are the largest arrays); st: their seam strokes; plan:
-    rigid groups (local tracks); colours within color_tolerance levels; joined: paths drawn as one element
-    (converter.encode.merge); shared: the animated palette whose entries the paths play (else each path's own
-    held steps)."""
-    track, tl = owned
-    owned.clear()
+def _encode_keyed(sheet: Sheet, fp: flatplan.FlatPlan, dur: str, report: Report, color_tolerance: float,
+                  progress: Progress = no_progress) -> tuple[list[str], int, dict]:
+    """The error-bounded integer encoding (module docstring) of a bounded plan: its paths' keys, rigid groups,
+    merged elements and colours (the shared palette's entries, else each path's own held steps within
+    color_tolerance levels). Takes the plan's track and timeline (set to None here, so that each is freed as soon
+    as it is used: on a long capture they are the largest arrays)."""
+    track, tl = fp.track, fp.timeline
+    fp.track = fp.timeline = None
+    budget, tris, active, st, plan = fp.budget, fp.tris, fp.active, fp.strokes, fp.rigid
+    joined, shared = fp.joined, fp.shared
     t, p = active.shape
     tol = budget.tolerance
     view_scale = budget.scale
     time_budget = budget.keytimes
-    radius, bound = _radius(budget, plan)
+    radius, bound = fp.radius()
     progress("text", 0.0)
     closed = st.closed(tris)
     geo = _d_animations(tl, p, t, plan.gain if plan is not None else None, view_scale, time_budget, dur, closed)
@@ -799,9 +602,8 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     color_tol = color_tolerance
     enc = {"scale": view_scale, "tolerance": tol, "fit_px": round(float(np.min(radius)), 6),
            "color_levels": color_tol, "hidden": "collapsed", "keytime_decimals": decimals}
-    starts = np.arange(p + 1) if joined is None else joined.starts
-    sets = [(a, b) for a, b in zip(starts[:-1].tolist(), starts[1:].tolist()) if b - a > 1]
-    inside = np.concatenate([np.arange(a, b) for a, b in sets]) if sets else np.zeros(0, np.int64)  # merged
+    starts, sets = fp.starts, fp.sets
+    inside = flatplan.merged_paths(sets)
     d_len = np.array([len(a) for a in d_anims])
     d_len[~active.all(axis=0)] = 0  # evenly spaced keys cannot collapse a hidden triangle
     d_len[inside] = 0  # a merged path's d is keyed for all its triangles together (_merged_geometry)
@@ -814,9 +616,7 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
     for j in [j for j in d_uniform if active[0, j]]:  # the static d holds frame 0 as played where it is shown
         d_first[j] = _path_strings(d_uniform[j][:1], off[j:j + 1], closed[j:j + 1])[0]
     if sets:  # a merged path's d is keyed for all its triangles together
-        m_radius = np.broadcast_to(np.asarray(radius, np.float64), (p,))
-        m_gain = plan.gain if plan is not None else np.ones(p)
-        m_anims, m_first, m_keys = _merged_geometry(track, active, m_radius, m_gain, sets, budget, dur, closed)
+        m_anims, m_first, m_keys = _merged_geometry(fp.merged, sets, fp.gain(), budget, t, dur, closed)
     del track
     # Colour: held steps within the colour tolerance (color_steps); the first step's colour is the path's class.
     columns = sheet.color_columns(tris)
@@ -830,12 +630,8 @@ def _encode_keyed(sheet: Sheet, budget: ErrorBudget, tris: np.ndarray, active: n
         base = (first[:, 0] << 16) | (first[:, 1] << 8) | first[:, 2]
         progress("text", 0.8)
     else:
-        ckeys = color_steps(sheet.face_rgb, active, color_tol, columns)  # as stored: no (T, P, 3) copy
+        ckeys = fp.steps  # each path's own held steps (a merged path's one static colour)
         progress("text", 0.8)
-        if sets:  # a merged path's one static colour (its code's)
-            ckeys.mask[:, inside] = False
-            ckeys.mask[0, inside] = True
-            ckeys.values[0, inside] = joined.levels[inside]
         cpk, cfk = np.nonzero(ckeys.mask.T)
         crow = ckeys.values.transpose(1, 0, 2)[cpk, cfk].astype(np.int64)
         c_vary = _varying(cpk, p, crow)

@@ -17,11 +17,12 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from converter.encode import keys as keyframes
+from converter.encode import seams
 from converter.errors import InputError
 from converter.extract import painter_order
 from converter.options import ConversionOptions, Progress, Report, no_progress, span
 from converter.sheet import Sheet
-from converter.writers import seams, svg_anim
+from converter.writers import svg_anim
 from converter.writers.gradients import LinearGradients, exact_gradients, vertex_ramps
 from converter.writers.svgtext import key_times
 from converter.writers.svgtext import number as svg_number

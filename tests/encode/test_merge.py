@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from converter import formats
-from converter.encode import merge
+from converter.encode import flatplan, merge
+from converter.encode.budget import ErrorBudget
 from converter.encode.tracks import Tracks
 from converter.errors import InputError
 from converter.extract import extract, fit_camera
@@ -60,13 +61,15 @@ def test_merged_sets_keyed_in_size_bands_match_one_padded_width():
     active[0] = True
     sets = [(0, 2), (2, 3), (3, 14), (14, 17), (17, 19), (19, 23)]
     sets = [s for s in sets if s[1] - s[0] > 1]
-    budget = svg_anim.ErrorBudget.split(0.25, 256)
+    budget = ErrorBudget.split(0.25, 256)
     tracks = Tracks(track.reshape(t, 3 * p, 2), np.arange(3 * p).reshape(p, 3))  # each corner its own vertex
-    args = (tracks, active, np.full(p, budget.keys), np.ones(p))
+    radius, gain = np.full(p, budget.keys), np.ones(p)
     closed = rng.random(p) > 0.3  # open subpaths too: the next moveto is relative to their last point
-    banded = svg_anim._merged_geometry(*args, sets, budget, "1.6s", closed)
-    single = svg_anim._merged_band(*args, sets, budget, "1.6s", closed)
-    assert len(set(np.ceil(np.log2([b - a for a, b in sets])).tolist())) >= 3
+    bands = flatplan.merged_keys(tracks, active, radius, sets)
+    one = flatplan.merged_band(tracks, active, radius, sets)
+    banded = svg_anim._merged_geometry(bands, sets, gain, budget, t, "1.6s", closed)
+    single = svg_anim._merged_geometry([one], sets, gain, budget, t, "1.6s", closed)
+    assert len(bands) >= 3 and sorted(np.concatenate([b.sets for b in bands]).tolist()) == list(range(len(sets)))
     assert banded == single and all(banded[0]) and banded[2] > len(sets) * 2
     # each set's frame-0 d holds its paths' rounded frame-0 corners, open or closed (read back by the verifier)
     for (a, b), first in zip(sets, banded[1]):

@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 from lxml import etree
 
+from converter.encode import seams
 from converter.errors import InputError
 from converter.extract import extract, fit_camera
 from converter.options import ConversionOptions, Report
 from converter.outputs import writer_for
-from converter.writers import seams, svg_gouraud
+from converter.writers import svg_gouraud
 from converter.writers.gradients import exact_gradients
 from tests.gouraud.meshes import ellipsoid
 

@@ -3,7 +3,7 @@
 Real files from other tools (../shared/data/real), the bundled sample, a generated morph + node-rotation
 scene, a generated skinned ICT face (neck, head and jaw joints plus morph targets, skinned_ict.py) and a
 generated thin-limbed skinned robot (robot.py), whose limbs are mostly outline: the flat writer's seam stroke
-stays off outline edges (converter/writers/seams.py), else it fattens them (min IoU 0.972 on the robot, 0.968 on
+stays off outline edges (converter/encode/seams.py), else it fattens them (min IoU 0.972 on the robot, 0.968 on
 MorphStressTest's bars when every edge was stroked). The same for the player (--to player) on its default WebGL
 renderer, which draws the triangles as they are (it grew each by 0.25 px before: robot 0.977, MorphStressTest clip
 1 0.976), and on its canvas 2D fallback, which strokes interior edges only; and for exact Gouraud on the robot.

@@ -1,4 +1,4 @@
-"""Seam strokes on interior edges only (converter/writers/seams.py): the outline does not grow, no seam opens.
+"""Seam strokes on interior edges only (converter/encode/seams.py): the outline does not grow, no seam opens.
 
 Rendered checks: inside the silhouette no page shows through (resvg and Chromium, stills and animation frames of
 a turning egg), and the drawn area is the fills' (the stroke adds nothing outside: a render with every path
@@ -15,9 +15,10 @@ import pytest
 from PIL import Image
 from scipy import ndimage
 
+from converter.encode import seams
 from converter.extract import extract, fit_camera
 from converter.options import ConversionOptions, Report
-from converter.writers import seams, svg_anim, svg_gouraud
+from converter.writers import svg_anim, svg_gouraud
 from tests.gouraud.meshes import ellipsoid
 from tests.svgrender import chromium_frame
 

@@ -12,7 +12,7 @@ from conftest import cube_animation
 from converter import extract
 from converter.animation import FaceAnimation, Part
 from converter.convert import convert_animation
-from converter.encode import colours
+from converter.encode import colours, freeknots
 from converter.encode.budget import viewbox_scale
 from converter.encode.keys import Keys, interpolate
 from converter.options import ConversionOptions, Report
@@ -123,7 +123,7 @@ def test_colour_keys_in_blocks_are_the_keys_in_one(monkeypatch):
     rgb[:, :5] = rgb[:1, :5]  # static colours among the animated ones
     active = rng.random((50, 23)) > 0.2
     whole = colours.color_keys(rgb, active, 3.0)
-    monkeypatch.setattr(svg_anim.freeknots, "BLOCK_TRACKS", 4)
+    monkeypatch.setattr(freeknots, "BLOCK_TRACKS", 4)
     blocks = colours.color_keys(rgb, active, 3.0)
     assert whole.values.dtype == np.uint8 and whole.mask[:, 5:].sum() > 2 * 18  # keyed, not all static
     assert np.array_equal(whole.mask, blocks.mask) and np.array_equal(whole.values, blocks.values)
