@@ -7,10 +7,9 @@ import numpy as np
 
 def unique_ints(x: np.ndarray) -> np.ndarray:
     """np.unique of integers x (sorted distinct values, flattened) by one sort. Since numpy 2.3 np.unique finds the
-    distinct values with a hash table, which on millions of distinct int64 is 50-300x slower than sorting: the
-    drawing-order pairs of the 128k-triangle bench face (11 M codes) took 11.5 s, a sort 0.2 s. The sort is numpy's
-    stable one: as fast on shuffled integers, and linear on a few sorted runs (those pairs arrive sorted, with
-    each band's chain after them: 1.0 s -> 0.04 s)."""
+    distinct values with a hash table, which on millions of distinct int64 is far slower than sorting (the
+    drawing-order pairs of the 128k-triangle bench face). The sort is numpy's stable one: as fast on shuffled
+    integers, and linear on a few sorted runs (those pairs arrive sorted, with each band's chain after them)."""
     s = np.sort(np.asarray(x).ravel(), kind="stable")
     if not len(s):
         return s
@@ -23,7 +22,7 @@ def unique_ints(x: np.ndarray) -> np.ndarray:
 def lexsort_ints(keys: tuple[np.ndarray, ...]) -> np.ndarray:
     """np.lexsort(keys) of integer (or bool) keys (the last key primary): one stable argsort of the keys packed
     into an int64, each offset by its least value, where their ranges fit 63 bits together (else np.lexsort).
-    The same order, 2.5-3x faster on the millions of keys of a long capture."""
+    The same order, faster on the millions of keys of a long capture."""
     keys = tuple(np.asarray(k) for k in keys)
     if not len(keys[0]):
         return np.zeros(0, np.intp)
@@ -41,7 +40,7 @@ def lexsort_ints(keys: tuple[np.ndarray, ...]) -> np.ndarray:
 
 def lengths(v: np.ndarray) -> np.ndarray:
     """Euclidean length of 2D vectors v (..., 2): np.linalg.norm(v, axis=-1) bit for bit (x*x + y*y, then the
-    root), 10-20x faster (numpy reduces a last axis of 2 slowly) and with one temporary where norm makes two."""
+    root), far faster (numpy reduces a last axis of 2 slowly) and with one temporary where norm makes two."""
     if v.shape[-1] != 2:
         raise ValueError(f"lengths() takes 2D vectors, not {v.shape[-1]}D")
     x, y = v[..., 0], v[..., 1]

@@ -42,8 +42,8 @@ MAX_OUTPUT_FLOATS = 1 << 30  # 4 GB of float32 frames: refuse captures that woul
 EYE_PARTS = ("eye", "iris")
 _SIDE = re.compile(r"(?:[._\s-](l|r|left|right)|(left|right))$", re.I)
 _PREFIX = re.compile(r"^(?:arkit|bs|blendshapes?|shapes?|morphs?)[_\-\s]+", re.I)
-FACE_READ_SHARE = 0.5  # of drive_file's progress, reading the face (an ICT head: 3 s; driving it by 1,000 frames
-# 0.6 s, by 4,000 2.4 s)
+FACE_READ_SHARE = 0.5  # of drive_file's progress, reading the face (an ICT head takes about as long to read as to
+# drive by a long capture: bench_weights)
 
 # ARKit blendshape -> (VRM preset, weight) for avatars with VRM expressions but few ARKit-named targets. Our own
 # table, not a published one: each pairing follows Apple's description of the blendshape
@@ -273,9 +273,9 @@ def drive(face: MorphFace, track: WeightTrack, fps: float | None = None,
                 pts[:, ids] = (pts[:, ids] - centre) @ np.swapaxes(r, 1, 2) + centre
         if head is not None:
             r = rotations(head[s:e]).astype(np.float32)
-            # batched matmul: 5x faster than the equivalent einsum for (B, V, 3) x (B, 3, 3). The pivot is taken
+            # batched matmul: faster than the equivalent einsum for (B, V, 3) x (B, 3, 3). The pivot is taken
             # off and put back as a row of V pivots over (B, 3V): numpy broadcasting a last axis of 3 ran its
-            # inner loop 3 elements at a time (3x the matmul's time); the same subtractions and additions.
+            # inner loop 3 elements at a time (slower than the matmul); the same subtractions and additions.
             centred = (out - pivots).reshape(pts.shape)
             turned = (centred @ np.swapaxes(r, 1, 2)).reshape(out.shape)
             np.add(turned, pivots, out=out)

@@ -100,7 +100,7 @@ def _extent(pts: np.ndarray, rows: int = 1024) -> tuple[np.ndarray, np.ndarray]:
     """Per column minimum and maximum (float64) of points pts (N, 3), exact, without float64 copies.
 
     Reduced as (N / rows, 3 rows) blocks: numpy reduces an (N, 3) array along axis 0 three values at a time,
-    ~20x slower on a long clip's hundred million points."""
+    far slower on a long clip's hundred million points."""
     head = len(pts) - len(pts) % rows
     parts = [pts[head:]] if head < len(pts) else []
     if head:

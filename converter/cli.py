@@ -191,7 +191,7 @@ def cmd_live(args: argparse.Namespace) -> int:
     """facesvg live: bridge Live Link Face, iFacialMocap and VMC streams to puppet players until Ctrl-C."""
     ports = live_ports.Ports(**{key: live_ports.port_number(getattr(args, f"{key}_port"), f"--{key}-port")
                                 for key in ("llf", "ifm", "vmc", "ws")})
-    # imported when it runs: websockets would add ~70 ms to every facesvg command (as webapp.cli defers Flask)
+    # imported when it runs: websockets' import would slow every facesvg command (as webapp.cli defers Flask)
     importlib.import_module("converter.live.server").run(args.host, ports, say=lambda line: print(line, flush=True))
     return 0
 

@@ -21,14 +21,14 @@ from converter.outputs import FAT2D, PUPPET, SHEET, OutputKind, output_kind
 from converter.sheet import Sheet
 from converter.userfiles import file_sha256
 
-WRITE_FROM = 0.2  # where the writer's share of a job's progress starts: the flat SVG's writer takes 75-90 % of the
-# time after loading (2D stage 1.0 s against writer 3.1 s on the capture-like face, 1 against 8 s on 8k x 1,000,
-# 7 against 40 s on the ICT head x 1,000), so the ETA extrapolated from the fraction done holds (bench_progress)
+WRITE_FROM = 0.2  # where the writer's share of a job's progress starts: the flat SVG's writer takes most of the
+# time after loading (on the capture-like face, 8k x 1,000 and the ICT head x 1,000 alike), so the ETA extrapolated
+# from the fraction done holds (bench_progress)
 LOADED_AT = 0.05  # where reading the input ends (a guess: options.Eta extrapolates from there)
 PREPARED_AT = 0.1  # where the 3D stages end (loading 0.05, FAP driving, cloning) and the 2D stage starts...
 SIMPLIFY_FROM = 0.08  # ... unless a triangle budget simplifies the mesh: it starts here and takes its share
-BUDGET_COST = 0.04  # its time per original triangle-frame against the rest's per budget triangle-frame: 59 ns (its
-# passes over every frame) against 1.5 us (extraction and the flat writer), ICT head x 4,000 frames to 1,500 triangles
+BUDGET_COST = 0.04  # its time per original triangle-frame (its passes over every frame) against the rest's per
+# budget triangle-frame (extraction and the flat writer), as timed on the ICT head x 4,000 frames to 1,500 triangles
 
 
 @dataclass
@@ -134,8 +134,8 @@ def convert_animation(
     """Convert an in-memory FaceAnimation with the options; the library's main entry point.
 
     Its 3D frames are let go once the 2D stage has read them: a caller that keeps no reference of its own (as
-    ``convert`` does) has them freed before the writer, whose peak they would otherwise add to (the ICT head x
-    4,000 frames: 1.3 GB)."""
+    ``convert`` does) has them freed before the writer, whose peak they would otherwise add to (a long capture's
+    are large: BENCHMARKS.md, conversion speed and memory)."""
     kind: OutputKind = output_kind(options.to)
     report = Report()
     report.warnings.extend(anim.extras.get("warnings", ()))  # the loader's notes (e.g. glTF clips not played)

@@ -3,7 +3,7 @@ the RenderError that names what to install when EGL is missing.
 
 The occlusion pass rendered its ids in this context until converter.raster replaced it; the tests' GL reference
 for that rasteriser (tests/reference/gl_ids.py) still does. Before it, the pass used pyrender's EGL platform,
-whose import brings pyrender's whole package (trimesh, its scene graph, its viewer): ~0.5 s CPU. The context is
+whose import brings pyrender's whole package (trimesh, its scene graph, its viewer), slow to load. The context is
 made as pyrender makes it: the first EGL device when the driver enumerates devices (else the default
 display), a pbuffer-capable RGB config, the desktop OpenGL API, no surface.
 """

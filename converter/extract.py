@@ -15,7 +15,7 @@ from converter.sheet import Sheet
 
 FRAME_BLOCK = 8  # frames per block of the per-frame work (every result is per frame, so blocks change no byte).
 # Small enough that a block's float64 temporaries are reused memory: at 32 frames each was a fresh mapping the
-# kernel zeroed (128k-triangle face: 65k -> 31k faults, 1.7-2.6 -> 1.3-1.4 s of system CPU in extraction)
+# kernel zeroed (on the 128k-triangle face, page faults and system CPU in extraction)
 
 
 def fit_camera(anim: FaceAnimation, size: int = 512, yaw: float = 0.0, pitch: float = 0.0,
@@ -31,9 +31,9 @@ def cull(xy: np.ndarray, ndc_z: np.ndarray, w: np.ndarray, faces: np.ndarray, wi
 
     A triangle is outside when its three corners lie beyond one side of the view volume, behind when one corner
     is not in front of the eye (w <= 0). Compiled, one pass per frame over its vertices (a bit per side) and one
-    over its faces: as numpy's gathers and passes over (T, F) arrays it cost 80 ns a triangle-frame (3.4 s on the
-    128k-triangle bench face, ~9 s on the 4,000-frame ICT head). The arithmetic is numpy's, operation for
-    operation (tests/core/test_camera.py keeps that version)."""
+    over its faces: as numpy's gathers and passes over (T, F) arrays it was one of extraction's largest costs on
+    dense faces and long captures. The arithmetic is numpy's, operation for operation (tests/core/test_camera.py
+    keeps that version)."""
     lead = ndc_z.shape[:-1]
     v = ndc_z.shape[-1]
     out = np.empty(lead + (len(faces),), bool)
@@ -64,8 +64,7 @@ def _cull(xy, ndc_z, w, faces, width, height, out):
 
 def unit_face_normals(frames: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """animation.face_normals(frames, faces), the same bits, compiled: one pass with no (T, F, 3) temporaries
-    (numpy's gathers, cross product and norm were 0.68 s of the capture-like face's 1.6 s extraction, 14.6 s on a
-    4,000-frame capture of the ICT head)."""
+    (numpy's gathers, cross product and norm were a large share of extraction)."""
     out = np.empty((frames.shape[0], faces.shape[0], 3), np.float32)
     frames = np.ascontiguousarray(frames)
     _unit_face_normals(frames, np.ascontiguousarray(faces, np.int64), frames.dtype.type(1), out)
@@ -102,8 +101,8 @@ def _unit_face_normals(frames, faces, one, out):
 
 
 def unit_vertex_normals(frames: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """animation.vertex_normals(frames, faces), the same bits, compiled (0.68 s of numpy on the capture-like face
-    for every Gouraud conversion; one frame's sums at a time here)."""
+    """animation.vertex_normals(frames, faces), the same bits, compiled (as numpy, a large share of every Gouraud
+    conversion's extraction; one frame's sums at a time here)."""
     frames = np.ascontiguousarray(frames)
     out = np.empty((frames.shape[0], frames.shape[1], 3), np.float32)
     _unit_vertex_normals(frames, np.ascontiguousarray(faces, np.int64), out)
@@ -191,12 +190,12 @@ def extract(
         kept = visible.any(axis=0)
     progress("shade", 0.75)
     vertex_colors = vertex_colors or bool(reference_frames)  # the reference renders are Gouraud-shaded
-    # Only the kept triangles' colours are stored and lit (no writer draws the others: on the ICT head 27k of 51k);
+    # Only the kept triangles' colours are stored and lit (no writer draws the others, a large share on the ICT head);
     # n.l is worked out for every face, as before, then taken, so that each value keeps its bits
     kept_ids = np.flatnonzero(kept)
     face_rgb = np.empty((t, len(kept_ids), 3), np.float32)
     vertex_rgb = np.empty((t, v, 3), np.float32) if vertex_colors else None
-    # decoded once, not per block of frames (0.3 s over the 4,000-frame ICT head's 500 blocks)
+    # decoded once, not per block of frames (a long capture has hundreds of blocks)
     tri_linear = np.take(srgb_to_linear(anim.triangle_colors()[None]), kept_ids, axis=1)
     vert_linear = srgb_to_linear(anim.face_base_colors()[None]) if vertex_rgb is not None else None
     for blk in _blocks(t):

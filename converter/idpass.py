@@ -4,11 +4,11 @@ Each frame's ids are rasterised on the CPU by converter.raster, GL's rules witho
 with Mesa's llvmpipe on every pixel of the bench faces but depth ties below float32 rounding, and keeps the same
 triangles; the tests check it against that GL render), into an id and a depth buffer reused for every frame; a
 compiled loop marks the ids' faces. A frame is drawn and read only in the tiles around the triangles it may
-still add (those it draws that no earlier frame kept): on one thread, 0.69 -> 0.44 s of CPU over the
-capture-like face's 335 frames, 1.70 -> 1.34 s over 300 frames of the ICT head, where rule 2's probes of ~6k
-hidden sub-pixel triangles a frame are most of what is left. Frames are split between parallel.THREADS slots.
-GL (llvmpipe) drew the ids until 2026-12: its per-triangle setup made the draw of a frame of the 128k-triangle
-bench face cost ~39 ms of CPU; here the whole frame, rule 2 included, costs ~12 ms.
+still add (those it draws that no earlier frame kept), which cuts the pass's CPU; on the ICT head rule 2's
+probes of its thousands of hidden sub-pixel triangles a frame are most of what is left (bench_occlusion times the
+pass: BENCHMARKS.md, occlusion pass). Frames are split between parallel.THREADS slots. GL (llvmpipe) drew the ids
+before: its per-triangle setup made the draw of a dense face's frame cost several times what the whole frame, rule
+2 included, costs here (converter.raster).
 
 A frame draws only the triangles the SVG draws in it (front-facing, in the view: converter.extract.cull), as
 the writers hide the others there: a triangle culled in a frame hides nothing in it (one with a corner behind
@@ -31,11 +31,12 @@ The rule (issue 15.8), in two parts:
    the owner's meet within d); one strictly behind another surface (an inner mouth behind the lips, an
    eyeball behind a closed lid) is farther by a gap and is dropped.
    Why not ids at a higher resolution: it only moves the limit (a triangle smaller than the finer pixel
-   still slips) and a 3x render costs several times the frame (on llvmpipe 52 vs 11 ms CPU on the
-   capture-like face). The probe rule errs on the safe side: where the owner is steep (lip and lid
+   still slips) and a 3x render costs several times the frame. The probe rule errs on the safe side: where the
+   owner is steep (lip and lid
    margins) it keeps hidden sub-pixel triangles just behind, which cost bytes, never a hole; what it can
    miss is a sub-pixel triangle covered at all four probes while a sliver of it peeks out (on the dense
-   ICT head: 2-4 px of summed coverage per 100k-pixel frame, against ~550 px lost by the old pass).
+   ICT head a few pixels of summed coverage a frame, far less than the old pass lost: BENCHMARKS.md, occlusion
+   pass).
 """
 
 from __future__ import annotations
@@ -52,8 +53,8 @@ SLACK = 2.0  # margin on the depth two planes of one surface can part by between
 DEPTH_EPS = 1e-6  # NDC depth below which two surfaces count as one (float rounding)
 PROBE_IN = 0.1  # corner probes sit this far from each corner toward the centroid, inside the triangle
 
-TILE = 16  # px: a frame is drawn only in the tiles of this side that hold a triangle not yet kept (a tenth of the
-# screen on the capture-like face and the ICT head after their first frames)
+TILE = 16  # px: a frame is drawn only in the tiles of this side that hold a triangle not yet kept (a small part of
+# the screen after the first frames)
 TILE_MARGIN = 2  # px around such a triangle's box: its pixel centres and its probes' pixels lie well within
 CHUNK = 16  # frames per slot between progress reports
 SLOT_BUDGET = 64 << 20  # bytes the slots' buffers may take together, unless one slot needs more: a large --size
@@ -146,7 +147,7 @@ def candidate_tiles(xy, fixed, faces, visible, kept, tiles, tile) -> bool:
 def _mark(ids, visible, kept, tiles, tile):
     """kept[f] = True for each face f that owns a pixel of ids (H, W; f + 1, 0 the background) in a marked tile
     (tiles, tile px a side) and is visible: one pass over those ids (marking a flag array through
-    ids.astype(intp) cost 1 ms a 512 px frame)."""
+    ids.astype(intp) cost a whole frame's conversion every frame)."""
     n = kept.shape[0]
     h, w = ids.shape
     for tr in range(tiles.shape[0]):
@@ -165,7 +166,7 @@ def _subpixel(ids, xy, z, faces, visible, kept):
     """Rule 2 of the module docstring, in place: kept[f] = True for each visible face f not yet kept whose
     inscribed circle is narrower than INRADIUS_PX and which is not behind the visible surface at one of its probe
     points. ids (H, W) as raster.draw_ids draws them; xy (V, 2) pixels with y down and z (V,) NDC depth of the
-    same frame. Compiled: as numpy over each frame's few candidates it cost 0.4 ms a frame in call overhead. The
+    same frame. Compiled: as numpy over each frame's few candidates its cost was mostly call overhead. The
     arithmetic is numpy's, operation for operation (tests/core/test_occlusion.py keeps that version)."""
     owner = np.empty(3)
     for f in range(len(kept)):

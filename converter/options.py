@@ -59,10 +59,10 @@ class SimplifyBound(NamedTuple):
 
 # At 256 px (the mobile preset): 0.5 px on average and 5 px at worst keep lips, lids and brows where they are, and a
 # part keeps 90% of its pixels at frame 0: hair, eyes, brows and lashes that show are never simplified away. The
-# bundled sample keeps 1,258 of its 2,138 front-facing triangles for it (0.27 / 3.8 px), a Ready Player Me avatar
-# driven by a Live Link Face take 1,374 of 4,625 (0.32 / 4.8 px); at the old count of 850 they moved by 0.72 / 21.9
-# px and 0.96 / 63.7 px, and lost up to 42% of an eye and 21% of the avatar's top. The cap (2,500) keeps the file
-# light where the bound would ask for more (the ICT head's lashes over its eyes: 7,166): it warns then.
+# bundled sample and a Ready Player Me avatar driven by a Live Link Face take keep well under the cap for it; at the
+# old count of 850 they moved by more than the bound, and lost much of an eye and of the avatar's top. The cap
+# (2,500) keeps the file light where the bound would ask for more (the ICT head, for its lashes over its eyes): it
+# warns then.
 SIMPLIFY_BOUND = SimplifyBound(mean_px=0.5, max_px=5.0, coverage_kept=0.9, slack_px=2)
 # Presets whose max_triangles is a cap, not a count: the fewest triangles that keep SIMPLIFY_BOUND, at most the cap
 # (a max_triangles given with the preset is the cap; without such a preset it is the count).
@@ -104,7 +104,7 @@ LOAD_STAGES = frozenset({"load", "weights"})  # reading the input: its share of 
 class Eta:
     """Seconds a conversion still needs from its progress calls (stage, fraction, now): extrapolated from the
     progress made since the input was read, whose time no share set before reading can foresee (driving the ICT
-    head by a capture is a third of a mobile-preset run, reading a small glTF nothing)."""
+    head by a capture is a large share of a mobile-preset run, reading a small glTF next to nothing)."""
 
     def __init__(self) -> None:
         self.origin: tuple[float, float] | None = None  # (time, fraction) the extrapolation counts from

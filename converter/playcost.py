@@ -4,7 +4,7 @@ Calibrated by bench_playback on the capture-like face and the sample (2-core mac
 a path costs its paint, a d animation re-lays its path every frame, and a (discrete) colour animation restyles
 it at a cost that grows with the document's paths, and a shared colour (a gradient's animated stop) repaints the
 paths that refer to it.
-A class, not a promise: the measurements scatter by +-40 % on a shared machine, more for single runs.
+A class, not a promise: the measurements scatter widely on a shared machine, more for single runs.
 """
 
 from __future__ import annotations

@@ -7,12 +7,11 @@ so a pixel centre on an edge two triangles share belongs to exactly one of them.
 plane at the pixel centre, in float64.
 
 Why not GL itself (Mesa's llvmpipe, which this pass used): a face's triangles are a few pixels each, and
-llvmpipe's per-triangle setup and binning dominate its frame. On the 128k-triangle bench face a frame's draw
-took ~39 ms of CPU there (draw call 18, rasterisation 20) and takes ~6 ms here; on the capture-like face ~2.7 ms
-there, ~1.3 ms here. The GL renderer stays as the tests' independent reference (tests/reference/gl_ids.py): the
-two draw the same ids on every pixel of the faces tested (float32 window positions snapped as GL snaps them)
-except where two surfaces lie within float32 depth rounding of each other: 1 pixel in 716k on 8 frames of the
-128k face, 0 in 734k on the capture-like face.
+llvmpipe's per-triangle setup and binning dominate its frame, the draw call and the rasterisation alike; here
+a frame's draw costs a fraction of that, the more so on dense faces (bench_occlusion times the pass). The GL
+renderer stays as the tests' independent reference (tests/reference/gl_ids.py): the two draw the same ids on
+every pixel of the faces tested (float32 window positions snapped as GL snaps them) except where two surfaces
+lie within float32 depth rounding of each other, on rare pixels of dense faces.
 """
 
 from __future__ import annotations

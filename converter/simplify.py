@@ -49,8 +49,8 @@ MOTION_FRAMES = 512  # frames the motion attributes read at most: memory and the
 # The budget's passes, ms per frame they read on the ICT head (wall, 1,000 and 4,000 frames): which triangles ever
 # face the camera and the deviation read every frame, the motion at most MOTION_FRAMES; their progress shares
 BUDGET_MS = {"facing": 1.1, "motion": 6.9, "deviation": 1.1}
-GRAM_DONE = 0.85  # of the motion pass, where the product m.T m is done and its eigenvectors start (ICT head x 512
-# frames: 2.3 s against 1.0 s of CPU)
+GRAM_DONE = 0.85  # of the motion pass, where the product m.T m is done and its eigenvectors start (the product is
+# the larger part, as timed on the ICT head x 512 frames)
 SEARCH_STEPS = 8  # halvings (in log error) of each part's search for the largest error its bound allows
 SEARCH_ERRORS = (1e-5, 0.1)  # meshoptimizer's relative error: every part kept whole ... simplified to its bones
 # What the search measures is not quite the final mesh's: deviation on PROBE_FRAMES (not every frame), each part's
@@ -62,7 +62,7 @@ FIX_RADIUS = 4  # px around the pixels a part lost to another within which that 
 FIX_ROUNDS, FIX_STEP = 8, 1.5  # then parts that break the bound together: their error divided by FIX_STEP, at most
 # FIX_ROUNDS times (and kept whole below the search's least error)
 PROBE_FRAMES = 32  # frames the search measures (probe_frames); the report reads every frame
-FIT_SHARE = 0.28  # of the facing pass, the camera's fit to every frame (0.5 of 1.8 s, ICT head x 2,000)
+FIT_SHARE = 0.28  # of the facing pass, the camera's fit to every frame (as timed on the ICT head x 2,000 frames)
 
 _P = ctypes.POINTER
 
@@ -89,8 +89,7 @@ def rigid_residual(frames: np.ndarray, rounds: int = 3, progress: Progress = no_
     The fit is repeated on the half of the vertices that deform least, so a jaw opening does not tilt it.
     Every frame is fitted on its own, a block of frames at a time: compiled passes over its vertices for the
     centroids and cross-covariance, then for the residual and its length (as numpy's weighted sums, products and
-    norm they were 4.4 s of CPU over 512 frames of the ICT head, now 1-1.5 s all told); the 3x3 SVDs and the
-    medians stay numpy's."""
+    norm they cost several times what the whole fit costs now); the 3x3 SVDs and the medians stay numpy's."""
     ref = np.asarray(frames[0], np.float64)
     # Stored vertex-major, as motion_attributes reads it (one row per vertex); returned as a (T, V, 3) view
     out = np.empty((frames.shape[1], frames.shape[0], 3), np.float64).transpose(1, 0, 2)

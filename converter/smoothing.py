@@ -28,7 +28,7 @@ def smooth(anim: FaceAnimation, sigma: float) -> FaceAnimation:
         raise InputError(f"smooth must be between 0 and {MAX_SIGMA:g} frames, got {sigma}.")
     if sigma == 0 or anim.n_frames < 2:
         return anim
-    from scipy.ndimage import gaussian_filter1d  # noqa: PLC0415 - ~0.1 s to import; only --smooth needs it
+    from scipy.ndimage import gaussian_filter1d  # noqa: PLC0415 - slow to import; only --smooth needs it
 
     frames = gaussian_filter1d(anim.frames.astype(np.float64), sigma, axis=0, mode="nearest")
     return anim.with_frames(frames.astype(np.float32))

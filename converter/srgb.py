@@ -23,8 +23,8 @@ def linear_to_srgb(c: np.ndarray) -> np.ndarray:
 
 def encode_clipped(c: np.ndarray) -> np.ndarray:
     """linear_to_srgb of float32 c already within 0..1 (NaN passes through), with no temporary but the result:
-    shading a 4,000-frame capture of the ICT head encodes 612 M values, where np.where's two full branches cost a
-    third more CPU than the power alone."""
+    shading a long capture of the ICT head encodes hundreds of millions of values, where np.where's two full
+    branches added much CPU to the power's own."""
     f = np.float32
     c = np.asarray(c)
     out = np.power(c, f(1 / 2.4), out=np.empty(c.shape, np.float32))

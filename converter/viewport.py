@@ -2,9 +2,9 @@
 
 Camera.project and Camera.fit run over every vertex of every frame (the extraction, the triangle budget, the
 verifier). As numpy, their arithmetic after the matrix products was a dozen passes over float64 temporaries,
-three quarters of a projection's time (6 of 8 ms a block of 8 frames of the ICT head). The operations and their
-order are numpy's, so every value keeps its bits (tests/core/test_camera.py keeps the numpy versions); the matrix
-products stay numpy's, whose BLAS sums in an order of its own."""
+most of a projection's time. The operations and their order are numpy's, so every value keeps its bits
+(tests/core/test_camera.py keeps the numpy versions); the matrix products stay numpy's, whose BLAS sums in an
+order of its own."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Compile the numba kernels ahead of the first conversion: `facesvg warm` (run by `make setup`).
 
 numba compiles a kernel on its first call and caches the machine code beside its module (or under
-NUMBA_CACHE_DIR), keyed by the source file. A fresh install's first conversion would otherwise spend ~20 s of
+NUMBA_CACHE_DIR), keyed by the source file. A fresh install's first conversion would otherwise spend most of its
 CPU compiling before it converts anything, each web worker's first job too (BENCHMARKS.md, start-up). Warming
 converts the bundled sample's first frames in memory, once per job in WARM_JOBS (and verifies the first, as the web
 worker verifies every job), and writes nothing but the cache; once the cache is warm it takes about as long as those
@@ -24,7 +24,7 @@ from converter.convert import convert_animation, load
 from converter.options import ConversionOptions, Progress, no_progress
 from converter.verify import verify_animation
 
-WARM_FRAMES = 12  # enough for every kernel to run (6 left the player's colour keys out); few: ~1 s once warm
+WARM_FRAMES = 12  # enough for every kernel to run (6 left the player's colour keys out); few: quick once warm
 WARM_JOBS = (  # the jobs whose kernels (or their argument types) differ; fap2d runs none of its own
     ConversionOptions(),
     ConversionOptions(shading="gouraud"),

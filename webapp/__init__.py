@@ -1,6 +1,6 @@
 """The web UI (Flask): upload, convert, preview, download. The app itself is in webapp.app; `create_app` and the
 other names are loaded from there on first use, so that importing a light part of the package (the `facesvg`
-command registers `serve` and `worker` through webapp.cli) does not load Flask, about 0.2 s of every
+command registers `serve` and `worker` through webapp.cli) does not load Flask, which would slow every
 `facesvg convert`."""
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The `facesvg serve` and `facesvg worker` subcommands' arguments. What they run is in webapp.commands, imported
 when one of them runs: every `facesvg` command builds this parser, and Flask, the job runner and their imports
-would add about 0.2 s to each `facesvg convert`."""
+would slow each `facesvg convert` (bench_startup)."""
 
 from __future__ import annotations
 

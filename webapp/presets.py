@@ -9,7 +9,7 @@ __all__ = ["PRESETS", "estimate_sizes", "has_preset"]  # name -> (label, option 
 
 # The mobile version's SVG bytes from the finished job's: OVERHEAD + SHARE x svg x (min(K, TRIANGLES) / K) **
 # EXPONENT, K the triangles it drew. The preset keeps the fewest triangles that hold its error bound at 256 px (a
-# few hundred to about 1,400 on a head, whatever the source had), and bytes shrink more slowly than triangles (its
+# bounded count on a head, whatever the source had), and bytes shrink more slowly than triangles (its
 # merged paths share keys); its coarser tolerance and static colours take the rest; OVERHEAD is what every SVG
 # carries (metadata, style). Fitted on default-option flat SVG jobs against the Mobile preset's made size, on real
 # files and the sample: `python bench/run.py bench_estimates` measures it (BENCHMARKS.md). Re-fit when the preset's

@@ -183,8 +183,8 @@ def perform(job: Job, storage: Storage, progress, preview_frames: int = 48) -> d
     inputs = storage.inputs(job.id)
     cache = inputs / job.files["cache"] if "cache" in job.files else None
     # The 3D frames are set aside in an anonymous file (gone with it, or with the process) while the writer runs,
-    # then mapped back for the verifier and the prerender: held, they added to the writer's peak (the ICT head x
-    # 4,000 frames: 1.3 GB). Written with tofile, not through a mapping, so they leave this process's memory.
+    # then mapped back for the verifier and the prerender: held, they added to the writer's peak (a long capture's
+    # are large: bench_webjob). Written with tofile, not through a mapping, so they leave this process's memory.
     with tempfile.TemporaryFile(dir=storage.job_dir(job.id), prefix=".frames-") as aside:
         rest: dict = {}
 

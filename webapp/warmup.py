@@ -1,9 +1,9 @@
 """Warm a worker before it takes jobs: `converter.warm` compiles (or loads) every JIT-compiled kernel.
 
-The first call of numba kernels holds the GIL for seconds (~20 s of CPU for all on a fresh install, longer on a
-busy machine), which would starve the lease heartbeat of the first job. Done once per worker process (embedded)
-or once in the RQ worker's main process, before it forks work horses, so every horse inherits the warm code.
-With the kernels already cached (`facesvg warm`, `make setup`) it costs ~0.7 s of CPU a worker.
+The first call of numba kernels holds the GIL for seconds (BENCHMARKS.md, start-up, for all of them on a fresh
+install; longer on a busy machine), which would starve the lease heartbeat of the first job. Done once per worker
+process (embedded) or once in the RQ worker's main process, before it forks work horses, so every horse inherits
+the warm code. With the kernels already cached (`facesvg warm`, `make setup`) it costs a worker little: it loads them.
 """
 
 from __future__ import annotations

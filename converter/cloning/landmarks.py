@@ -81,7 +81,7 @@ def _filled(z: np.ndarray) -> np.ndarray:
 
 def _peaks(z: np.ndarray, prominence: float) -> np.ndarray:
     """Indices of the local maxima of z that stand out by at least `prominence`."""
-    # scipy.signal costs ~0.9 s at import, half of `import converter.convert`: only landmark detection needs it.
+    # scipy.signal is slow to import, much of `import converter.convert`'s time: only landmark detection needs it.
     from scipy.signal import find_peaks  # noqa: PLC0415 - heavy; loaded on first use to keep start-up fast
 
     return find_peaks(z, prominence=prominence)[0]

@@ -71,7 +71,7 @@ def color_steps(rgb: np.ndarray, active: np.ndarray, tolerance: float,
     colour.
 
     Why steps and not linear keys: Chromium re-evaluates an interpolated colour animation far more slowly than a
-    discrete one (bench_playback: the sample's exact-colour file played 3x faster with the same values held), and
+    discrete one (bench_playback: the sample's exact-colour file played much faster with the same values held), and
     the steps need about as many keys as the linear greedy within the same tolerance."""
     p = active.shape[1]
     mask, values = held.hold(rgb, np.arange(p) if paths is None else paths, active, tolerance)

@@ -9,7 +9,7 @@ its window is the range of p + v (k - s) over the polygon. A backward pass then 
 with the smallest velocity (zero when the last segment allows it, so a track that never leaves eps is two equal
 keys), and each earlier key in the middle of what its segment allows. Per coordinate this is the classic
 window-propagating greedy for continuous piecewise-linear fitting under a max-norm bound. On captured motion
-the file comes out a quarter smaller than with keys on sampled values (bench_capture).
+the file comes out markedly smaller than with keys on sampled values (bench_capture).
 
 The loops do not vectorise (polygons grow and shrink per track), so they are compiled with numba.
 ``point_keys`` turns a Euclidean bound on 2D points into per-coordinate ones (a few rectangles inscribed in the
@@ -36,7 +36,7 @@ SLACK = 1e-8  # the bound holds to eps + SLACK (eps + |x| + 1); tracks the final
 
 
 # The polygons live in one array, addressed by slot, and the helpers are inlined: numba reference-counts every
-# array a function receives (atomic operations, contended between threads sharing x), which took half the loop's
+# array a function receives (atomic operations, contended between threads sharing x), which took much of the loop's
 # time when each cut was a call on slices.
 @numba.njit(cache=True, nogil=True, inline="always")
 def _rect(dst, di, lo, hi) -> int:
@@ -319,8 +319,8 @@ def lean_deg(xy: np.ndarray, active: np.ndarray, first: int = 0) -> np.ndarray:
 @numba.njit(cache=True, nogil=True)
 def _jitter(xy, active, first, ex, ey) -> None:
     """lean_deg's sums into ex, ey (n,) for tracks first.. of xy: each second difference in xy's dtype (as np.diff
-    makes it), summed in float64 (numpy's where, abs and sum over (T, N, 2m) temporaries took 2 s of the
-    128k-triangle face's writer)."""
+    makes it), summed in float64 (numpy's where, abs and sum over (T, N, 2m) temporaries were a noticeable share
+    of the 128k-triangle face's writer)."""
     t, n, d = xy.shape[0], active.shape[1], xy.shape[2]
     for k in range(2, t):
         for i in range(n):
@@ -346,8 +346,8 @@ def point_keys(xy: np.ndarray, active: np.ndarray, radius: float | np.ndarray,
 
     Without best the first shape is reduced for every track. Unless exhaustive, a track then tries only the
     further shape nearest the lean of its jitter (``lean_deg``; the rectangle on its side of the square), and none
-    when it never bends: on the capture-like face that keeps 98 % of the keys trying every shape on every track
-    saves (95 % at 1 px), for half its CPU.
+    when it never bends: on the capture-like face that keeps nearly all of the keys trying every shape on every
+    track saves, for much less CPU.
 
     progress("keys", fraction of the work done) before each block of tracks (without best, the first shape's
     pass counts as half of it)."""

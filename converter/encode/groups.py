@@ -75,7 +75,7 @@ SMALL_BAND_TRIANGLES, SMALL_BAND_SHARE = 100, 0.02  # pieces below max(these) ne
 NO_LIMIT = np.iinfo(np.int64).max  # freeknots' limit for a track that never stops early
 # A path of a run that may pay stops its head-local keys at (1 + STOP_SLACK) its band-local keys plus STOP_SHARE
 # times its share of the keys the run must save. Tighter stops sooner but proves fewer runs: on the 128k-triangle
-# bench face (0, 1) redid 26k of 92k paths, (0.2, 1.5) about 1.2k.
+# bench face (0, 1) redid a large share of the paths, (0.2, 1.5) few.
 STOP_SLACK, STOP_SHARE = 0.2, 1.5
 MERGE_PX = 1.5  # a piece whose motion a larger band explains this well (px, 95th percentile) joins it
 HEAD_SHARE = 0.1  # px the head transform's keyframing may leave to the residual, as a share of the tolerance
@@ -83,8 +83,8 @@ BAND_SHARE = 0.3  # the same for each band's transform inside the head's (smooth
 EVERY_FRAME_SHARE = 0.8  # when keyframing keeps more frames than this share, write every frame (no keyTimes)
 PLAIN_SAMPLE = 4  # the plain key count that decides whether groups pay is estimated on every 16th path, then
 PLAIN_MARGIN = 0.25  # on every 4th when the first estimate is within this share of the grouped cost
-PLAN_SHARES = (0.3, 0.75)  # where plan's layout ends and its decision ends, as fractions of its time (wall, the
-# capture-like face, 8k x 1,000 and the ICT head x 1,000: layout 0.25-0.37, decision 0.40-0.48, refining 0.23-0.27)
+PLAN_SHARES = (0.3, 0.75)  # where plan's layout ends and its decision ends, as fractions of its time (wall, as
+# timed on the capture-like face, 8k x 1,000 and the ICT head x 1,000)
 TIME_DECIMALS = 4  # keyTimes of the transform animations are played (and so written) rounded to these decimals
 # A played transform shrinking some direction below this (viewport px per local px) in a frame is degenerate: its
 # inverse would blow local coordinates up past the float error budget (and is singular at 0). The goldens' and the
@@ -268,7 +268,7 @@ def motion_clusters(band: np.ndarray, faces: np.ndarray, xy: np.ndarray, neutral
 
     # Worked out a block of frames at a time, three times over (their mean, their spread about it, then the
     # features), rather than held: the residuals (T, n, 2), their lengths and then a transposed copy for the
-    # features were the peak of a long capture (ICT head x 4,000: 7.98 GB).
+    # features were the peak of a long capture (the ICT head x 4,000: BENCHMARKS.md, conversion speed and memory).
     total = np.zeros((len(verts), 2))  # the residuals' sum over frames, added frame by frame as .sum(axis=0) adds
     for _, part in residuals():
         for f in range(len(part)):  # (no loop name left holding a view of the buffer)
@@ -300,7 +300,7 @@ def principal_components(feat: np.ndarray, k: int) -> np.ndarray:
     """Coordinates (n, k) of the rows of centred feat (n, m) on its k leading principal axes (u s of the SVD).
 
     Only the k leading axes are needed: Lanczos (ARPACK, fixed start vector, so deterministic) on feat^T feat
-    costs a few products with feat, where a full SVD costs n m^2 (3 s at 8k triangles x 335 frames)."""
+    costs a few products with feat, where a full SVD costs n m^2."""
     n, m = feat.shape
     if k >= min(n, m) - 1:
         u, sv, _ = np.linalg.svd(feat, full_matrices=False)
@@ -314,7 +314,7 @@ def principal_components(feat: np.ndarray, k: int) -> np.ndarray:
 def apply_linear(lin: np.ndarray, pts: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """Per frame t the 2x2 map lin[t] (T, 2, 2) applied to the points pts[t] (T, ..., 2), or to the same points
     pts (N, 2) in every frame -> (T, N, 2); into out (contiguous, pts' shape or (T, N, 2)) when given. A matrix
-    product: einsum takes ~15x longer on (T, P, 3, 2) tracks."""
+    product: einsum takes far longer on (T, P, 3, 2) tracks."""
     lin_t = np.swapaxes(lin, 1, 2)
     if pts.ndim == 2:
         return np.matmul(pts[None], lin_t, out=out)
@@ -464,7 +464,7 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
            progress: Progress = no_progress) -> Layout:
     """Head motion, bands, played transforms, run order and local tracks for paths tris (P,) shown where
     active (T, P). progress(stage, fraction of the layout done) between its steps (shares measured on the ICT
-    head x 1,000 and the capture-like face: the overlap search is about half of it).
+    head x 1,000 and the capture-like face: the overlap search is its largest step).
 
     xy (T, V, 2) px comes from the Sheet; budget.tolerance px is the global bound the residual encoder works to
     (the transforms take HEAD_SHARE and BAND_SHARE of it as fitting slack, not as error). The head's transform is
@@ -484,8 +484,8 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
     if not invertible(head.matrices):  # e.g. the skin scaled to nothing in a frame: no head transform
         head = identity_motion(t, kt_decimals)
     # local_tracks, worked in xy64's place a block of frames at a time (xy64 is not needed after this): a second
-    # (T, V, 2) float64 array is fresh pages for the kernel to zero (with motion_clusters' blocks, the system CPU
-    # of layout, apply_linear and motion_clusters went 3.3 -> 1.7 s on the 128k-triangle bench face)
+    # (T, V, 2) float64 array is fresh pages for the kernel to zero (with motion_clusters' blocks, this cut the
+    # system CPU of layout, apply_linear and motion_clusters on the 128k-triangle bench face)
     in_head = xy64  # head frame px, about its centroid; the rest works in it (and the overlap test on the float32 xy)
     del xy64
     inv = np.linalg.inv(head.matrices[:, :, :2])
@@ -502,7 +502,7 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
                        BAND_SHARE * tolerance, scale, kt_decimals)
     progress("motion", 0.5)
     # Stored as float32: ~1e-5 px at these magnitudes (budget.float_err), half the plan's largest array; and only
-    # the vertices of the paths tris (on the ICT head 16.8k of 26.7k: the others' triangles are never seen)
+    # the vertices of the paths tris (on the ICT head well under all: the others' triangles are never seen)
     rows = unique_ints(faces[tris])
     local = np.empty((t, len(rows), 2), np.float32)
     for sl in blocks(t, FRAME_BLOCK):
@@ -516,7 +516,7 @@ def layout(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int
                                             progress=span(progress, 0.5, 0.98)))
     band = band[order]
     # Rows renumbered in the order the paths first use them: a block of paths then gathers its tracks from nearby
-    # rows of each frame (the ICT head x 1,000: 0.6 -> 0.3 s a pass over every path; the plan makes ~5)
+    # rows of each frame (a faster pass over every path on the ICT head x 1,000; the plan makes several)
     corners = row_of[faces[tris[order]]]
     along = first_use(corners, len(rows))
     for sl in blocks(t, FRAME_BLOCK):
@@ -617,7 +617,7 @@ def plan(xy: np.ndarray, faces: np.ndarray, part_ids: np.ndarray, neutral: int, 
     # Band-local keys first, then head-local ones: a path of a run that may pay stops its head-local keys once it
     # needs STOP_SLACK more than its band-local keys and STOP_SHARE times its share of the group's cost (freeknots'
     # limit). Where those lower bounds already make the run pay, their full counts are not needed (wrapped paths:
-    # their head-local keys were twice the band-local ones on the 128k-triangle bench face); in the other runs the
+    # their head-local keys far outnumbered the band-local ones on the 128k-triangle bench face); in the other runs the
     # paths that stopped are redone. The groups, keys and counts are those of every head-local track in full.
     kh_n, kl_n = np.zeros(p, np.int64), np.zeros(p, np.int64)
     head_parts: list[keyframes.Packed] = []

@@ -76,7 +76,7 @@ def pack(keys: Keys) -> Packed:
 def _move_keys(mask, dense, packed, start, to_packed) -> None:
     """Key values between dense (T + 1, N, D), where mask, and packed (K, D), track by track from start (N + 1,),
     each track's by frame: in one pass over the frames (np.nonzero of the transposed mask and a fancy-indexed
-    gather took 4 ms a 1,024-path block)."""
+    gather made several passes a block)."""
     at = start[:-1].copy()
     for k in range(mask.shape[0]):
         for j in range(mask.shape[1]):
@@ -259,7 +259,7 @@ def _within(indptr, indices, data, keys, flat, active, radius, d, pairs, ok):
     """uniform_fit's check, track by track, stopping at its first frame out of bounds: ok[j] = at every active
     frame k the keys interpolated (row k of the CSR hat matrix times keys, as scipy sums it) are within radius[j]
     of flat[k] for each point (pairs: Euclidean per 2D point, else per coordinate). A NaN distance passes, as
-    numpy's max and > let it. As numpy it was (T, N * D) float64 temporaries, 40 % of the uniform keys' time."""
+    numpy's max and > let it. As numpy it was (T, N * D) float64 temporaries, much of the uniform keys' time."""
     t = flat.shape[0]
     step = 2 if pairs else 1
     for j in range(len(ok)):

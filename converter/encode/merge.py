@@ -1,9 +1,9 @@
 """Fewer animated elements: runs of paths of one static colour merged into one <path> of several subpaths.
 
 A player's cost per frame grows with the number of animated elements (bench_playback: the mobile-preset
-capture-like face plays in Chromium at about 13 fps at 4x CPU throttling with its 871 paths, 28 with the same
-triangles in 300 paths). Under an explicit budget (``--max-animations N``) the flat SVG writer merges
-paths that:
+capture-like face plays in Chromium under CPU throttling markedly faster with the same triangles in fewer paths;
+BENCHMARKS.md, playback in Chromium under CPU throttling). Under an explicit budget (``--max-animations N``) the
+flat SVG writer merges paths that:
 
 - sit in the same group (the rigid planner's runs, converter.encode.groups), so one transform moves them all;
 - have one static colour: their middle shade's entry in a median-cut palette (PALETTES, largest first) where
@@ -16,8 +16,8 @@ wherever one triangle covers another the painter's order is unchanged; neighbour
 which moves which of their 0.5 px seam strokes lies on top. A run of one colour is then cut into sets of at
 most ``size`` neighbours (Z-order of their mean positions). The palette and sizes are the largest and
 smallest that bring the elements under the budget. The writer keys each set's subpaths together (one keyTimes list,
-free knots over all its points), so the colour error (reported) and the bytes (about 1.4x on that face) are
-what the budget costs.
+free knots over all its points), so the colour error (reported) and the extra bytes (bench_playback's files)
+are what the budget costs.
 """
 
 from __future__ import annotations

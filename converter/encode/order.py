@@ -18,7 +18,7 @@ front can change from frame to frame. What we do and what we measured (bench/ben
 The error left is measured against a z-buffer (bench/order_measure.py, ``order_error``): pyrender renders
 triangle ids, resvg renders the same frame's SVG with ids as colours, and we count covered interior pixels
 (away from anti-aliased edges) whose front triangle differs. On the ICT faces (head turns up to +-40 degrees)
-the fixed neutral-frame order leaves under 0.3% of such pixels wrong, as a per-frame painter's sort would; the
+the fixed neutral-frame order leaves few such pixels wrong, as few as a per-frame painter's sort; the
 experimental layer copies fix a triangle crossing in front of another (tests) but made the faces worse, so
 the default is the fixed order; see BENCHMARKS.md for the figures.
 """

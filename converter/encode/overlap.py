@@ -22,8 +22,9 @@ from converter.options import Progress, no_progress
 
 # Frames per candidate-search block: a block's boxes hold its frames' motion, so the best block is about as many
 # frames as a triangle takes to move its own size (any size finds the same pairs; the exact test decides per frame).
-# On the capture-like face (8 px triangles moving ~1 px a frame) 6-16 frames were equally fast, 2 or 24 a third
-# slower; on its 128k-triangle subdivision (2 px triangles) 2 frames took 8.2 s where 8 took 14.6 and 16 26.4.
+# On the capture-like face (8 px triangles moving ~1 px a frame) a middle range of block lengths were equally fast,
+# much shorter or longer ones slower; on its 128k-triangle subdivision (2 px triangles) the shortest blocks were
+# the fastest by far.
 BLOCK_RANGE = (2, 32)
 MOTION_FRAMES = 50  # the motion a frame is the median over the first this many frames
 CELL_BOXES = 1.5  # grid cell side, in median box sides (largest side) of the block
@@ -167,14 +168,14 @@ def _candidates(key, owner, box, band, flag, idx, table, shift, nb, out, first, 
     """Pairs (a < b) of boxes of different band that meet and whose paths (idx[a], idx[b]) are not yet in the
     PairSet table, from the cells whose first entry lies in first..last-1, as (buffer, M): the pairs are
     buffer[:M], buffer being out (K, 2) or, when more than K pairs come, a larger one, which the caller passes in
-    for the next block (a fresh buffer per block, grown by doubling, faulted in ~1.5 GB over the 128k-triangle
-    face's 67 blocks). Each cell is read by the one call whose slice holds its first entry, so calls on slices
+    for the next block (a fresh buffer per block, grown by doubling, faulted its pages in again on every block of
+    the 128k-triangle face). Each cell is read by the one call whose slice holds its first entry, so calls on slices
     of the entries find the pairs of one call on all of them, in the same order, and may run at once (the table
     is only read).
 
     From the entries of _cell_lists: a cell's boxes of one band are consecutive, so only pairs across its bands
-    are looked at, and a cell inside one band costs one pass (on the 128k-triangle face, 43 % of the cells and half
-    the pairs within cells: 19.7 -> 13.8 s over its 335 frames).
+    are looked at, and a cell inside one band costs one pass (on the 128k-triangle face, many of the cells and of
+    the pairs within cells, which cut the search's time).
 
     Each pair is reported in one cell only: the cell holding the low corner of the two boxes' intersection, which
     both cover when they meet: there, in x and in y, the cell is the lowest of one of the two boxes."""
@@ -207,7 +208,7 @@ def _candidates(key, owner, box, band, flag, idx, table, shift, nb, out, first, 
                         continue
                     if m == len(out):
                         grown = np.empty((max(2 * m, 16), 2), np.int64)
-                        for r in range(m):  # not grown[:m] = out: its shape check's message took 3 s to compile
+                        for r in range(m):  # not grown[:m] = out: its shape check's message was slow to compile
                             grown[r, 0], grown[r, 1] = out[r, 0], out[r, 1]
                         out = grown
                     out[m, 0], out[m, 1] = u, v
@@ -222,11 +223,11 @@ class PairSet:
     tile a 64-bit word beside its number in an open-addressing table (kept at most half full).
 
     Memory follows the pairs found, not the paths squared (a bitmap of 27k paths would take 712 MB) nor the
-    blocks (a list of each block's finds, deduplicated at the end, peaked 1.8 GB on a 4,000-frame capture of the
-    ICT head). With paths numbered along the screen (``overlap_pairs``), a path's partners are mostly its
-    neighbours' too: the 11 M pairs of the 128k-triangle bench face fill 1.1 M tiles (64 MB of table), and the
-    156 M look-ups of its search mostly meet tiles read just before. A table of one hashed slot per pair (256 MB)
-    missed the cache on most: 6.6 s of look-ups, against about 2 s."""
+    blocks (a list of each block's finds, deduplicated at the end, peaked high on a long capture of the ICT head).
+    With paths numbered along the screen (``overlap_pairs``), a path's partners are mostly its neighbours' too:
+    the millions of pairs of the 128k-triangle bench face fill far fewer tiles, and the look-ups of its search
+    mostly meet tiles read just before. A table of one hashed slot per pair, several times larger, missed the
+    cache on most look-ups, which took several times as long."""
 
     def __init__(self, n: int, bits: int | None = None):
         bits = PAIRSET_BITS if bits is None else bits
@@ -261,8 +262,8 @@ class PairSet:
         """The pairs (E, 2), sorted, with each path a renamed to relabel[a] (relabel: a permutation of 0..n-1,
         default none) and each pair written (smaller, larger)."""
         relabel = np.arange(self.n, dtype=np.int64) if relabel is None else np.asarray(relabel, np.int64)
-        code = np.empty(self.count, np.int64)  # smaller * n + larger: one array sorted in place (the 11 M pairs of
-        # the 128k-triangle face took 1.2 s as separate arrays relabelled, compared and sorted)
+        code = np.empty(self.count, np.int64)  # smaller * n + larger: one array sorted in place (the millions of
+        # pairs of the 128k-triangle face were slow as separate arrays relabelled, compared and sorted)
         _codes(self.table, self.tiles, relabel, self.n, code)
         code.sort()
         out = np.empty((len(code), 2), np.int64)
@@ -282,9 +283,8 @@ def _table(slots: int) -> np.ndarray:
 def _slot(code, shift):
     """The first slot to try for tile number code in a table of 2^(64 - shift) slots: Fibonacci hashing (the top
     bits of the product with 2^64 / golden ratio) of code without its low SLOT_GROUP bits, then those bits. The
-    search looks up a path's pairs with its neighbours, tiles of one row: on the 128k-triangle bench face the 156 M
-    look-ups took 3.9 s with every tile hashed apart, 3.4 s with 4 of a row to a line (CPU beyond the box tests,
-    median of 3 runs)."""
+    search looks up a path's pairs with its neighbours, tiles of one row: on the 128k-triangle bench face its
+    look-ups took less CPU with 4 of a row to a line than with every tile hashed apart."""
     g = min(SLOT_GROUP, 64 - shift)
     low = code & ((1 << g) - 1)
     if shift + g >= 64:  # a table of 2^g slots or fewer
@@ -439,13 +439,14 @@ def overlap_pairs(xy_paths: np.ndarray, active: np.ndarray, block: int | None = 
     kept unless every such frame shows it apart, so the result is conservative. A pair found in one block is not
     tested again. A negative margin asks for pairs whose interiors overlap by more than -margin along every axis
     (converter.encode.order). With band (P,), only pairs of different bands are returned (``reorder`` keeps each
-    band's own order anyway). On the capture-like face this exact test halves the runs the box test alone leaves.
+    band's own order anyway). On the capture-like face this exact test removes many of the runs the box test alone
+    leaves.
     block: frames per block (default ``block_frames``).
 
     drift (T, 2) px, optional: a translation per frame (the head's) taken off before the candidate search. A
     translation moves every box of a frame alike, so the same pairs come out; what the paths do besides it is
-    slower, so a block spans more frames for the same box sizes (on the 128k-triangle bench face the head's
-    translation halves the median step: 5 frames a block where the screen allows 2).
+    slower, so a block spans more frames for the same box sizes (on the 128k-triangle bench face, taking off the
+    head's translation lets a block span more frames than the screen alone allows).
 
     progress("overlap", fraction of the frames searched) after each block."""
     t, p = active.shape

@@ -42,7 +42,7 @@ def default_threads() -> int:
 
 THREADS = default_threads()
 T = TypeVar("T")
-PIECES = 4  # slices of a threaded loop per thread (the ICT head x 1,000: this thread waited 2.9 s of 70 on halves)
+PIECES = 4  # slices of a threaded loop per thread (with halves, the thread done first sat waiting on the ICT head)
 
 
 def use_threads(n: int) -> None:
@@ -58,8 +58,8 @@ _pool: tuple[int, int, ThreadPoolExecutor] | None = None  # (pid that made it, h
 
 
 def _helpers() -> ThreadPoolExecutor:
-    """THREADS - 1 threads kept for the life of the process: a pool per call started ~260 threads a conversion
-    of the capture-like face (0.2 s)."""
+    """THREADS - 1 threads kept for the life of the process: a pool per call started hundreds of threads a
+    conversion."""
     global _pool
     helpers = max(1, THREADS - 1)
     if _pool is None or _pool[:2] != (os.getpid(), helpers):  # a pool's threads do not survive fork
@@ -112,6 +112,6 @@ def serial_blas() -> AbstractContextManager:
     """A context in which numpy's BLAS runs on one thread.
 
     The converter's products are many small ones (per-frame 3x3 solves, (T, n) @ (n, 9) fits, 2x2 maps) where
-    OpenBLAS's threads spin more than they compute: on the capture-like face they cost 1.7 s of CPU of 14 for
-    no wall time saved (2026-12-03)."""
+    OpenBLAS's threads spin more than they compute: on the capture-like face they cost CPU for no wall time
+    saved."""
     return threadpool_limits(1, user_api="blas")

@@ -3,8 +3,8 @@
 Each frame's 2x3 map is iteratively reweighted least squares with Cauchy weights, so that lips and a jaw moving
 on their own barely pull a fit of the whole skin. The loop is compiled (numba, nogil, frames split over a few
 threads) and reads the points straight from the Sheet's (T, V, 2) array: the numpy version gathered them into a
-float64 copy and made ~10 passes over (T, n, 2) temporaries per iteration (1.8 s of 21 on an 8k-triangle,
-1,000-frame face, 2026-12-04).
+float64 copy and made ~10 passes over (T, n, 2) temporaries per iteration, a noticeable share of a long
+conversion.
 """
 
 from __future__ import annotations
@@ -69,7 +69,8 @@ def _fit_frames(ref, xy, idx, iterations, huber, out, first, stop):  # pragma: n
     solution (all 1 at first), solves the weighted normal equations and keeps the solution.
 
     The sums are scalars, not the cells of m and b: the compiler cannot tell those arrays from the points', so it
-    stored and reloaded every cell at every point (2.6 s of the 128k-triangle face's writer). Each sum adds the same
+    stored and reloaded every cell at every point (a noticeable share of the 128k-triangle face's writer). Each sum
+    adds the same
     terms in the same order either way."""
     n = len(idx)
     m = np.empty((3, 3))

@@ -3,7 +3,7 @@
 Each path's frames are sequential (a step ends where a frame no longer fits the colour held), so both loops run
 in numba, frame by frame with each path's state held, over the Sheet's colours as stored (float32 (T, N, 3) in
 0..1, read through the paths' columns): the loop over frames vectorised over paths it replaced cost a Python
-iteration and a (P, 3) gather per frame, ~1 s a thousand frames on the capture-like face.
+iteration and a (P, 3) gather per frame, a cost that grew with every frame of a long capture.
 """
 
 from __future__ import annotations

@@ -77,7 +77,7 @@ class MorphFace:
 def load_morph_face(path: str | Path, progress: Progress = no_progress) -> MorphFace:
     """A face with named morph targets from a glTF/GLB, a zip of OBJ shapes (neutral.obj + jawOpen.obj ...), or
     an ICT FaceKit folder; progress("load", fraction of its shapes read) after each shape of a zip or a folder
-    (an ICT head's 27 are 3 s of parsing; a glTF's come in one parse)."""
+    (an ICT head's 27 are seconds of parsing; a glTF's come in one parse)."""
     path = Path(path)
     if path.is_dir():
         return from_ict(path, progress)

@@ -1,7 +1,8 @@
 """The puppet's triangle budget: only the triangles some pose shows, on a mesh simplified within a pixel bound.
 
 The player draws every triangle of the puppet every frame, so its triangles are its frame cost (software GL drew a
-dense head's 46,690 in ~25 ms of CPU a frame). Two steps cut them, both by default (model.build):
+dense head's triangles too slowly for the display rate: bench_puppet). Two steps cut them, both by default
+(model.build):
 
 1. Occlusion (`seen`). The puppet's poses are sampled: rest, each target at its keyforms, the head over the
    visibility grid, each eye over a coarser one, the target that moves most under head turns, and SEEDED_POSES
@@ -29,8 +30,8 @@ from converter.mpeg4.tables import sphere_center
 
 BOUND_PX = 0.5  # px at the output size: meshoptimizer's error bound on the simplified surface
 MAX_TRIANGLES = 16000  # a mesh that shows more is simplified towards this many (never past BOUND_PX); one that shows
-# fewer is kept whole: the Ready Player Me avatar's 5,800 draw at 60 fps, and simplifying them cost SSIM
-# (0.96 -> 0.92 against our prerender)
+# fewer is kept whole: the Ready Player Me avatar's draw at the display rate (bench_puppet), and simplifying them
+# cost SSIM against our prerender
 MORPH_WEIGHTS = (0.5, 1.0)  # each target's sampled weights
 HEAD_GRID = tuple(float(a) for a in range(-40, 41, 10))  # degrees of head yaw and pitch sampled (model's grid)
 EYE_GRID = (-40.0, 0.0, 40.0)  # ... and of each eye's

@@ -12,11 +12,11 @@ Head yaw, pitch and roll and each eye's yaw and pitch are rigid turns, and a ver
 its point (`unproject`, the camera's inverse): the player turns the displaced points in world space, as
 blendshapes.drive does (eyes about their fitted sphere centres first, then the head about the centre of the rest
 bounding box, R = Ry Rx Rz), and projects them again. That is exact at every angle and costs no table; sampled
-angle keyforms (Live2D's AngleX/AngleY, bilinear, a 7 x 7 grid every 10 degrees) were 80 % of the package and
-1 px off between keyforms. The mesh holds every triangle front-facing at rest, under any single target at its
-keyforms, or at any angle of VISIBILITY_GRID: a turn beyond it may show a triangle the puppet lacks. By default
-(build's budget) it then keeps only those some sampled pose shows, simplified within a pixel bound where there are
-more than the player draws at the display rate (converter/puppet/budget.py).
+angle keyforms (Live2D's AngleX/AngleY, bilinear, a 7 x 7 grid every 10 degrees) were most of the package and
+drifted off the exact turn between keyforms. The mesh holds every triangle front-facing at rest, under any single
+target at its keyforms, or at any angle of VISIBILITY_GRID: a turn beyond it may show a triangle the puppet lacks.
+By default (build's budget) it then keeps only those some sampled pose shows, simplified within a pixel bound where
+there are more than the player draws at the display rate (converter/puppet/budget.py).
 
 Colour: the puppet keeps each triangle's (flat) or vertex's (Gouraud) rest normal (octahedral, 2 x int8) and unlit
 base colour, and the player lights them as converter.lighting does with the normals turned by the head (`shade`), so

@@ -58,7 +58,7 @@ HEADER = struct.Struct("<4sHHIdIIIIIIIIIII")  # magic, version, flags, frames, f
 FLAG_GOURAUD = 1  # colour tracks per vertex (else per path)
 FLAG_WIDE = 2  # position values are int32 (else int16)
 FLAG_HEAD = 4  # positions are local to a per-frame head transform (last section: float32 (T + 1, 2, 3))
-DEFLATE_CHUNK = 1 << 20  # bytes deflated between progress reports (~0.2 s at level 9)
+DEFLATE_CHUNK = 1 << 20  # bytes deflated between progress reports (a fraction of a second at level 9)
 BYTES_PER_KEY = 2.5  # deflated bytes of a position key (capture-like), against the head transform's float32s
 COLOR_LEVELS = 3.0  # colour keys within this many 8-bit levels (the SVG's exact colours): colour costs the GPU nothing
 MAX_FRAMES = 65534  # key frames are uint16 (frame T, the loop end, included)
@@ -277,7 +277,7 @@ def write(sheet: Sheet, options: ConversionOptions, report: Report, progress: Pr
     if options.frame is not None:
         raise InputError("--frame makes a still, which the player does not; drop --frame or use --to svg.")
     block = encode(sheet, options, report, progress)
-    packed = deflate(block, span(progress, 0.6, 1.0))  # zlib at level 9: 40 % of the capture-like face's writing
+    packed = deflate(block, span(progress, 0.6, 1.0))  # zlib at level 9: a large share of the writer's CPU
     report.sizes["player_deflated"] = len(packed)
     scale = HEADER.unpack_from(block)[7]
     w, h = sheet.camera.width, sheet.camera.height

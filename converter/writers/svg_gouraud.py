@@ -411,7 +411,7 @@ def write(sheet: Sheet, options: ConversionOptions, report: Report, progress: Pr
         signals = _signals_chapter(tri_xy, tri_rgb, color_scale)
         draw = _chapter_triangle
     x = signals.matrix()
-    progress("keys", 0.55)  # the signals (gradients of every triangle and frame) took half the writing
+    progress("keys", 0.55)  # the signals (gradients of every triangle and frame) take about as long as the rest
     keys: dict[bool, tuple[np.ndarray, np.ndarray]] | None = None
     if options.raw and not still:
         every = (np.ones((t_all + 1, len(order)), bool), np.concatenate([x, x[-1:]], axis=0))

@@ -209,7 +209,7 @@ class _Document(Accessors):
                 v = p["positions"]
                 local = v[None]
                 if k:
-                    # einsum, not @: a small product through multithreaded BLAS is 100x slower on a busy machine.
+                    # einsum, not @: a small product through multithreaded BLAS is far slower on a busy machine.
                     local = local + np.einsum("tk,kvc->tvc", weights, p["deltas"])
                 if node.get("skin") is not None:  # the node's own transform is ignored (glTF 2.0, skins)
                     check_joint_indices(p["joints"], p["weights"], len(joint_nodes), self.name,

@@ -47,7 +47,7 @@ def sample_texture(pixels: np.ndarray, uv: np.ndarray, wrap_s: int = 10497, wrap
     mode = mode_s
     if mode_s != mode_t:  # map_coordinates takes one mode: fold each axis into the image first
         x, y, mode = _wrap(x, w, mode_s), _wrap(y, h, mode_t), "nearest"
-    from scipy import ndimage  # noqa: PLC0415 - ~0.1 s to import (it parses docstrings); only textured files need it
+    from scipy import ndimage  # noqa: PLC0415 - slow to import (it parses docstrings); only textured files need it
 
     out = np.empty((len(uv), 3), np.float32)
     lut = (srgb_to_linear if decode_srgb else np.asarray)(np.arange(256, dtype=np.float32) / 255.0)
