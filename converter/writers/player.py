@@ -40,12 +40,9 @@ from html import escape
 from importlib import resources
 
 import numpy as np
-from scipy import sparse
 
-from converter.encode import colours, freeknots, groups, robust_affine
-from converter.encode import keys as keyframes
-from converter.encode.budget import ErrorBudget
-from converter.encode.order import draw_list
+from converter.encode import groups, playerplan
+from converter.encode.playerplan import COLOR_LEVELS
 from converter.errors import InputError
 from converter.options import ConversionOptions, Progress, Report, no_progress, span
 from converter.sheet import Sheet
@@ -59,8 +56,6 @@ FLAG_GOURAUD = 1  # colour tracks per vertex (else per path)
 FLAG_WIDE = 2  # position values are int32 (else int16)
 FLAG_HEAD = 4  # positions are local to a per-frame head transform (last section: float32 (T + 1, 2, 3))
 DEFLATE_CHUNK = 1 << 20  # bytes deflated between progress reports (a fraction of a second at level 9)
-BYTES_PER_KEY = 2.5  # deflated bytes of a position key (capture-like), against the head transform's float32s
-COLOR_LEVELS = 3.0  # colour keys within this many 8-bit levels (the SVG's exact colours): colour costs the GPU nothing
 MAX_FRAMES = 65534  # key frames are uint16 (frame T, the loop end, included)
 MAX_EXPANDED = 1 << 27  # numbers the player may expand (frames x tracks x coordinates) before it refuses
 DATA_ID = "facesvg-data"
@@ -118,21 +113,6 @@ def _pack_keys(mask: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.nda
     return counts, fd, vd
 
 
-def _vertex_active(active: np.ndarray, path_vertices: np.ndarray, n_vertices: int) -> np.ndarray:
-    """Bool (T, V): a vertex is active where any path using it is shown."""
-    p = len(path_vertices)
-    inc = sparse.csr_matrix((np.ones(3 * p), (np.repeat(np.arange(p), 3), path_vertices.ravel())),
-                            shape=(p, n_vertices))
-    return np.asarray((inc.T @ sparse.csr_matrix(active.T.astype(np.float64))).todense().T) > 0
-
-
-def _color_keys(rgb: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Colour tracks (T, N, 3) 0..1 as linear keys within COLOR_LEVELS levels (colours.color_keys, its bound
-    kept where keys fall outside 0..255), packed."""
-    ck = colours.color_keys(rgb, active, COLOR_LEVELS)
-    return _pack_keys(ck.mask, ck.values)
-
-
 def _changes(active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Visibility (T, P) as initial state (P,), change counts (P,) and change frame deltas, path-major."""
     change = np.zeros(active.shape, bool)
@@ -143,45 +123,6 @@ def _changes(active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     fd = np.diff(fk, prepend=0)
     fd[first] = fk[first]
     return active[0].astype(np.uint8), np.bincount(pk, minlength=active.shape[1]), fd
-
-
-def _head(sheet: Sheet, tris: np.ndarray, local: np.ndarray, xy: np.ndarray,
-          budget: ErrorBudget) -> tuple[np.ndarray, np.ndarray, float] | None:
-    """The head transform: per frame the affine map of the largest part from the neutral frame
-    (robust_affine.fit_affine, float32 as stored; frame T repeats frame T-1), the vertices (T, V, 2) in its frame, and
-    the radius their keys may use: the map magnifies a local error by at most its largest singular value.
-    None when a frame's map is (nearly) singular."""
-    part = sheet.part_ids[tris]
-    skin = np.unique(local[part == np.bincount(part).argmax()])
-    fit = robust_affine.fit_affine(xy[sheet.neutral, skin], xy, skin)
-    mats = np.concatenate([fit, fit[-1:]]).astype(np.float32)
-    a = mats[:-1].astype(np.float64)
-    det = np.linalg.det(a[:, :, :2])
-    if not (np.isfinite(a).all() and (np.abs(det) > 1e-3).all()):
-        return None
-    local_xy = groups.apply_linear(np.linalg.inv(a[:, :, :2]), xy - a[:, None, :, 2])
-    gain = float(np.linalg.norm(a[:, :, :2], ord=2, axis=(1, 2)).max())
-    radius = (budget.tolerance - budget.float_err) / gain - budget.rounding
-    return mats, local_xy, radius
-
-
-def _position_keys(sheet: Sheet, tris: np.ndarray, verts: np.ndarray, local: np.ndarray, vact: np.ndarray,
-                   budget: ErrorBudget, rigid: bool,
-                   progress: Progress = no_progress) -> tuple[keyframes.Keys, np.ndarray | None]:
-    """Per-vertex keys in px, or (with rigid) local to the head transform (_head) when that saves more key bytes
-    than the transform costs; the transforms (T + 1, 2, 3) float32 or None. progress(stage, fraction done)."""
-    xy = np.take(sheet.xy, verts, axis=1).astype(np.float64)
-    # Keys sit on integer frames (nothing to round in time): the keyTimes share is the keyframes' too.
-    plain = freeknots.point_keys(xy, vact, budget.tolerance - budget.rounding - budget.float_err,
-                                 progress=span(progress, 0.0, 0.45))
-    head = _head(sheet, tris, local, xy, budget) if rigid else None
-    if head is None or head[2] <= 0.1 * budget.keys:
-        return plain, None
-    mats, local_xy, radius = head
-    keys = freeknots.point_keys(local_xy, vact, radius, progress=span(progress, 0.55, 1.0))
-    if (plain.mask.sum() - keys.mask.sum()) * BYTES_PER_KEY <= mats.nbytes:
-        return plain, None
-    return keys, mats
 
 
 def _section(a: np.ndarray) -> bytes:
@@ -199,26 +140,13 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, progress: P
         raise InputError(f"the player holds at most {MAX_FRAMES} frames, got {t}; convert a shorter range "
                          "(--start/--end).")
     progress("order", 0.0)
-    dl = draw_list(sheet, layers=options.depth_layers)
-    shown_any = dl.active.any(axis=0)
-    tris, active = dl.triangles[shown_any].astype(np.int64), np.compress(shown_any, dl.active, axis=1)
-    p = len(tris)
-    progress("keys", 0.05)
-    corners = sheet.faces[tris].astype(np.int64)
-    verts, local = np.unique(corners, return_inverse=True)
-    local = local.reshape(p, 3)
-    n_v = len(verts)
-    vact = _vertex_active(active, local, n_v)
-    budget = ErrorBudget.split(options.tolerance, max(sheet.camera.width, sheet.camera.height))
-    pos, mats = _position_keys(sheet, tris, verts, local, vact, budget, options.rigid, span(progress, 0.05, 0.45))
-    q = pos._replace(values=np.rint(np.multiply(pos.values, budget.scale, dtype=np.float64)))
+    pp = playerplan.plan(sheet, options, progress)
+    budget, tris, active, verts, local = pp.budget, pp.tris, pp.active, pp.verts, pp.local
+    q, mats = pp.positions, pp.head
+    p, n_v, gouraud = len(tris), len(verts), pp.gouraud
     pc, pf, pv = _pack_keys(q.mask, q.values)
     wide = bool(len(pv)) and (pv.min() < -32768 or pv.max() > 32767)
-    gouraud = options.shading != "flat"
-    rgb, cact = ((np.take(sheet.vertex_rgb, verts, axis=1), vact) if gouraud
-                  else (sheet.face_colors(tris), active))
-    progress("colours", 0.45)
-    cc, cf, cv = _color_keys(rgb, cact)
+    cc, cf, cv = _pack_keys(pp.colours.mask, pp.colours.values)
     vis0, vc, vf = _changes(active)
     sections = [
         verts.astype("<u4"), tris.astype("<u4"), local.astype("<u4"),
@@ -237,7 +165,7 @@ def encode(sheet: Sheet, options: ConversionOptions, report: Report, progress: P
     report.counts["player_head_transform"] = int(mats is not None)
     report.counts["color_keys"] = int(len(cf))
     report.counts["visibility_changes"] = int(len(vf))
-    report.counts["depth_conflicts"] = dl.conflicts
+    report.counts["depth_conflicts"] = pp.conflicts
     report.figures["keys_per_vertex"] = len(pf) / max(n_v, 1)
     report.sizes["player_block"] = len(head) + len(payload)
     return head + payload
