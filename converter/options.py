@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import Any, NamedTuple
 
 from converter.errors import InputError
-from converter.playcost import playback_class
+from converter.playcost import describe as describe_playback
 
 SHADINGS = {
     "flat": "Flat (smallest)",
@@ -382,7 +382,7 @@ class Report:
             f"{sum(self.timings.values()):.2f} s",
         ]
         if "playback_ms_4x" in self.figures:
-            parts.append(playback_class(self.figures["playback_ms_4x"]))
+            parts.append(describe_playback(self.figures["playback_ms_4x"]))
         if "max_deviation_px" in self.figures:
             parts.append(f"max deviation {self.figures['max_deviation_px']:.3f} px")
         return ", ".join(parts)

@@ -103,3 +103,14 @@ def test_playback_classes_order_by_cost():
     assert playcost.playback_class(light) == playcost.CLASSES[0][1]
     assert playcost.playback_class(heavy) == playcost.HEAVY
 
+
+
+def test_the_playback_description_says_what_plays_on_phones():
+    """A file not light enough for phones says its predicted phone frame rate and what to use instead; a light one
+    says only its class (the CLI summary's words)."""
+    light = playcost.describe(20.0)
+    slow = playcost.describe(250.0)
+    assert light == playcost.CLASSES[0][1]
+    assert slow.startswith(playcost.HEAVY) and "~4 fps" in slow and "--preset mobile" in slow
+    summary = Report(counts={"frames": 3}, figures={"playback_ms_4x": 250.0}).summary()
+    assert "~4 fps on a mid-range phone" in summary
