@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from converter.writers.gradients import (
+from converter.encode.gradients import (
     LinearGradients,
     barycentric,
     exact_gradients,

@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 from lxml import etree
 
-from converter.encode import seams
+from converter.encode import gouraudplan, seams
+from converter.encode.gradients import exact_gradients
 from converter.errors import InputError
 from converter.extract import extract, fit_camera
 from converter.options import ConversionOptions, Report
 from converter.outputs import writer_for
 from converter.writers import svg_gouraud
-from converter.writers.gradients import exact_gradients
 from tests.gouraud.meshes import ellipsoid
 
 SVG = "{http://www.w3.org/2000/svg}"
@@ -258,7 +258,7 @@ def test_silhouette_edges_tell_folds_from_the_outline():
 def test_underlay_stays_inside_the_silhouette_but_covers_folds():
     tri_xy = np.array([[[10, 10], [30, 10], [10, 30]]], float)
     sil = np.array([[True, False, False]])  # only the top edge (y = 10) is silhouette
-    (path,) = svg_gouraud.underlay(tri_xy, np.full((1, 3, 3), 0.5), np.zeros(1, int), sil)
+    (path,) = svg_gouraud.underlay(gouraudplan.underlay(tri_xy, np.full((1, 3, 3), 0.5), np.zeros(1, int), sil))
     pts = np.array(NUM.findall(path.split('"')[1]), float).reshape(3, 2)
     assert np.allclose(pts[:, 1].min(), 10 + svg_gouraud.UNDERLAY_INSET, atol=0.06)  # top edge pulled in
     assert np.allclose(pts[:, 0].min(), 10, atol=0.06)  # left edge (not silhouette) kept
