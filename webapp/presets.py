@@ -15,7 +15,7 @@ __all__ = ["PRESETS", "estimate_sizes", "has_preset"]  # name -> (label, option 
 # files and the sample: `python bench/run.py bench_estimates` measures it (BENCHMARKS.md). Re-fit when the preset's
 # simplification changes.
 OVERHEAD = 1400
-SHARE = 0.454
+SHARE = 0.48
 TRIANGLES = 1200
 EXPONENT = 0.7
 # The options the model was fitted at (their defaults): a job made otherwise gets no figure, not a wrong one.
