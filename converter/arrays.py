@@ -47,3 +47,9 @@ def lengths(v: np.ndarray) -> np.ndarray:
     out = np.asarray(x * x)  # an array even for one vector, so the root can be taken in place
     out += y * y
     return np.sqrt(out, out=out)
+
+
+def painter_order(depth: np.ndarray, faces: np.ndarray, candidates: np.ndarray, frame: int) -> np.ndarray:
+    """Candidate triangle ids sorted back to front by centroid depth at one frame (stable, deterministic)."""
+    centroid = depth[frame][faces[candidates]].mean(axis=1)
+    return candidates[np.argsort(-centroid, kind="stable")].astype(np.int32)

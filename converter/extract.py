@@ -7,6 +7,7 @@ import numpy as np
 
 from converter import framing, idpass, render
 from converter.animation import FaceAnimation
+from converter.arrays import painter_order
 from converter.camera import Camera
 from converter.errors import InputError
 from converter.lighting import DEFAULT_LIGHTING, Lighting, lambert_linear, srgb_to_linear
@@ -141,12 +142,6 @@ def _unit_vertex_normals(frames, faces, out):
             out[k, a, 0] = x / ln
             out[k, a, 1] = y / ln
             out[k, a, 2] = z / ln
-
-
-def painter_order(depth: np.ndarray, faces: np.ndarray, candidates: np.ndarray, frame: int) -> np.ndarray:
-    """Candidate triangle ids sorted back to front by centroid depth at one frame (stable, deterministic)."""
-    centroid = depth[frame][faces[candidates]].mean(axis=1)
-    return candidates[np.argsort(-centroid, kind="stable")].astype(np.int32)
 
 
 def _blocks(n_frames: int) -> list[slice]:

@@ -15,10 +15,10 @@ from typing import NamedTuple
 import numpy as np
 from PIL import Image, ImageDraw
 
+from converter.arrays import painter_order
 from converter.encode import keys as keyframes
 from converter.encode import seams
 from converter.encode.gradients import LinearGradients, exact_gradients, vertex_ramps
-from converter.extract import painter_order
 from converter.options import ConversionOptions, Progress, no_progress, span
 from converter.sheet import Sheet
 
