@@ -12,7 +12,7 @@ from typing import Any
 
 from converter.errors import InputError
 from converter.options import ConversionOptions, OptionField, Progress, Report
-from converter.writers import fap2d, player, puppet, svg_anim, svg_gouraud
+from converter.writers import fap2d, lottie, player, puppet, svg_anim, svg_gouraud
 
 Writer = Callable[[Any, ConversionOptions, Report, Progress], bytes]  # (2D data, options, report, progress)
 """(what the stage built: a Sheet or a Fat2dSheet, options, report) -> the output's bytes."""
@@ -82,6 +82,11 @@ OUTPUTS: dict[str, OutputKind] = {k.name: k for k in (
                                 "gouraud-chapter": svg_gouraud.write},
                gzip_option="svgz", verify=True),
     OutputKind("player", "WebGL player (HTML)", player.write, (PLAYER_FILE,), stills=False, verify=True),
+    OutputKind("lottie", "Lottie animation (JSON)", lottie.write,
+               (OutputFile("lottie", "Lottie (.json)", ".json", "application/json", attachment=True),), verify=True),
+    OutputKind("dotlottie", "dotLottie animation (.lottie)", lottie.write_dotlottie,
+               (OutputFile("dotlottie", "dotLottie (.lottie)", ".lottie", "application/zip", attachment=True),),
+               verify=True),
     OutputKind("fap2d", "MPEG-4 2D face package", fap2d.write,
                (OutputFile("fap2d", "2D face package (.zip)", ".zip", "application/zip", attachment=True,
                            download_suffix=".fap2d.zip"),),

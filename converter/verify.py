@@ -1,7 +1,7 @@
 """The verifier: evaluate an animated SVG's SMIL at every frame time and compare with the exact projection.
 
 A player file (``--to player``, recognised by content) is decoded by converter.writers.player instead and
-compared the same way.
+compared the same way, and a Lottie file (``--to lottie``, ``--to dotlottie``) by converter.writers.lottie.
 
 It reads the SVG with lxml, takes the camera, frame rate and options from ``<metadata id="facesvg">``,
 re-loads the input (converter.formats.load plus the same 3D stages: frame range, triangle budget, ...),
@@ -39,7 +39,7 @@ from converter.encode.groups import apply_linear
 from converter.errors import InputError
 from converter.extract import cull
 from converter.options import ConversionOptions, Report
-from converter.writers import player
+from converter.writers import lottie, player
 
 SVG_NS = "{http://www.w3.org/2000/svg}"
 NO_PATHS = "the SVG has no triangle paths (id f<number>); only facesvg output can be verified."
@@ -481,6 +481,9 @@ def evaluate(data: bytes) -> Evaluated:
     if player.is_player(data):  # the player's block decoded by its own reader
         d = player.decode(data)
         return Evaluated(d.meta, d.triangles, d.path_xy(), d.shown)
+    if lottie.is_lottie(data):  # Lottie JSON or a dotLottie zip, evaluated by its writer's reader
+        d = lottie.decode(data)
+        return Evaluated(d.meta, d.triangles, d.xy, d.shown, d.collapsed)
     root = read_svg(data)
     meta = metadata_of(root)
     parts = list(_svg_paths(root, meta, _svg_times(meta)))
@@ -647,7 +650,7 @@ def exact_projection(anim, camera: Camera, frames: slice = slice(None)) -> tuple
 def verify_animation(data: bytes, anim, tolerance: float | None = None) -> Verification:
     """Verify SVG bytes against an already prepared FaceAnimation (the exact 3D the SVG should show); an SVG's
     paths are evaluated and measured a block at a time."""
-    if player.is_player(data):
+    if player.is_player(data) or lottie.is_lottie(data):
         ev = evaluate(data)
         meta, n_frames, parts = ev.meta, ev.xy.shape[0], iter([(ev.triangles, ev.xy, ev.shown, ev.collapsed)])
     else:
@@ -704,7 +707,12 @@ def verify_file(svg_path: str | Path, input_path: str | Path, cache: str | Path 
         data = Path(svg_path).read_bytes()
     except OSError as exc:
         raise InputError(f"cannot read {svg_path}: {exc.strerror}.") from None
-    meta = player.decode(data).meta if player.is_player(data) else metadata_of(read_svg(data))
+    if player.is_player(data):
+        meta = player.decode(data).meta
+    elif lottie.is_lottie(data):
+        meta = lottie.metadata(data)
+    else:
+        meta = metadata_of(read_svg(data))
     opts = meta.get("options", {})
     options = ConversionOptions.from_mapping({k: v for k, v in opts.items() if not isinstance(v, (dict, list))})
     anim = load(input_path, options, cache)  # with the options' --weights capture, when it was driven by one
@@ -715,7 +723,7 @@ def verify_file(svg_path: str | Path, input_path: str | Path, cache: str | Path 
 def register_cli(subparsers) -> None:
     """Add `facesvg verify OUT.svg INPUT [--cache FILE] [--tolerance PX] [--json]`."""
     p = subparsers.add_parser("verify", help="check an SVG against the exact projection of its input")
-    p.add_argument("svg", help="the SVG (or .svgz, or player .html) written by facesvg convert")
+    p.add_argument("svg", help="the SVG (or .svgz, player .html, Lottie .json or .lottie) written by facesvg convert")
     p.add_argument("input", help="the input animation it was converted from")
     p.add_argument("--cache", help="PC2 or MDD point cache for an OBJ input")
     p.add_argument("--tolerance", type=float, help="px bound to check (default: the SVG's stated tolerance)")

@@ -143,36 +143,36 @@ def test_validation_follows_the_same_ranges_and_choices():
 
 
 def fake_writer(sheet, options, report, progress) -> bytes:
-    """A stand-in Lottie-like writer: the frame count and the kept triangles as JSON."""
+    """A stand-in writer of a JSON format (Rive-like): the frame count and the kept triangles as JSON."""
     return json.dumps({"frames": sheet.n_frames, "triangles": int(sheet.kept.sum())}).encode()
 
 
 @pytest.fixture
-def lottie(monkeypatch):
+def rive(monkeypatch):
     """An extra output kind, registered the way a new writer would be: one OutputKind entry."""
-    kind = OutputKind("lottie", "Lottie animation", fake_writer,
-                      (OutputFile("lottie", "Lottie (JSON)", ".json", "application/json"),))
-    monkeypatch.setitem(outputs.OUTPUTS, "lottie", kind)
+    kind = OutputKind("rive", "Rive animation", fake_writer,
+                      (OutputFile("rive", "Rive (JSON)", ".json", "application/json", download_suffix=".rive.json"),))
+    monkeypatch.setitem(outputs.OUTPUTS, "rive", kind)
     return kind
 
 
-def test_an_extra_output_kind_is_offered_everywhere(lottie, web, tmp_path):
-    assert "lottie" in cli_actions()["to"].choices
-    assert upload_props(web)["to"]["enum"][-1] == "lottie"
+def test_an_extra_output_kind_is_offered_everywhere(rive, web, tmp_path):
+    assert "rive" in cli_actions()["to"].choices
+    assert upload_props(web)["to"]["enum"][-1] == "rive"
     doc = web.get("/api/v1/openapi.json").get_json()
     kinds = doc["paths"]["/jobs/{job_id}/result/{kind}"]["parameters"][1]["schema"]["enum"]
-    assert "lottie" in kinds
+    assert "rive" in kinds
     to = form_controls(web).get_element_by_id("opt-to")
-    assert {o.get("value"): o.text_content() for o in to.iter("option")}["lottie"] == "Lottie animation"
+    assert {o.get("value"): o.text_content() for o in to.iter("option")}["rive"] == "Rive animation"
     # ... and it converts: the CLI names the file with the kind's extension and writes what its writer wrote.
     src = tmp_path / "cube.glb"
     src.write_bytes(glb_bytes())
-    assert main(["convert", str(src), "--to", "lottie", "--size", "64", "--no-occlusion", "-q"]) == 0
+    assert main(["convert", str(src), "--to", "rive", "--size", "64", "--no-occlusion", "-q"]) == 0
     svg = convert(src, ConversionOptions(size=64, occlusion=False))
     assert json.loads((tmp_path / "cube.json").read_bytes()) == {
         "frames": svg.report.counts["frames"], "triangles": svg.report.counts["triangles_kept"]}
 
 
 def test_an_unknown_output_kind_is_refused_by_the_api(web):
-    r = web.post("/api/v1/jobs", data={"to": "lottie", "sample": "1"}, content_type="multipart/form-data")
-    assert r.status_code == 400 and "unknown output kind 'lottie'" in r.get_json()["error"]
+    r = web.post("/api/v1/jobs", data={"to": "rive", "sample": "1"}, content_type="multipart/form-data")
+    assert r.status_code == 400 and "unknown output kind 'rive'" in r.get_json()["error"]
