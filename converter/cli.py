@@ -109,6 +109,8 @@ def cmd_convert(args: argparse.Namespace) -> int:
                      cache=args.cache)
     write_atomic(out, result.data)
     print(f"{out}: {result.report.summary()}")
+    for warning in result.report.warnings:  # what the web page lists under the result
+        print(f"facesvg: warning: {warning}", file=sys.stderr)
     if args.report:
         write_atomic(Path(args.report), result.report.dumps().encode())
     return 0

@@ -63,6 +63,7 @@ BYTES_PER_KEY = 110  # typical text of one shape key (a triangle's 6 integers, i
 GROUP_CLOSE = "]}"
 ORDER_DONE = 0.02  # progress of the writing when the drawing order is known and the plan starts
 KEYS_DONE = 0.8  # progress of the writing when the plan is done and the text starts
+HEAVY_ELEMENTS = 2000  # animated shapes past which the report warns (bench_lottie: ThorVG may not load such a file)
 TEXT_BLOCK = 512  # elements whose texts are written between two progress calls
 IDENTITY = {"translate": [0.0, 0.0], "rotate": [0.0], "skewX": [0.0], "scale": [1.0, 1.0]}
 
@@ -427,6 +428,10 @@ def _report(report: Report, sheet: Sheet, fp: flatplan.FlatPlan, n_elements: int
     tris = fp.tris
     report.counts["paths"] = n_elements
     report.counts["keys"] = int(n_keys)
+    if n_elements > HEAVY_ELEMENTS:
+        report.warnings.append(
+            f"this Lottie animates {n_elements:,} shapes: native players slow down with thousands of animated paths "
+            "and ThorVG may not load it; --preset mobile makes one for apps (bench_lottie measures both).")
     report.counts["static_paths"] = static
     report.counts["animated_paths"] = n_elements - static
     report.counts["color_keys"] = n_colour_keys

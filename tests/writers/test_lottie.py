@@ -262,3 +262,18 @@ def test_fixed_numbers():
     assert lottie.fixed(np.array([0, 5, -5, 120, -49973]), 4) == ["0", "0.0005", "-0.0005", "0.012", "-4.9973"]
     assert lottie.fixed(np.array([3, -2]), -2) == ["300", "-200"]
 
+
+
+def test_a_lottie_with_thousands_of_shapes_says_so_on_the_command_line(tmp_path, sample_path, monkeypatch, capsys):
+    """Past HEAVY_ELEMENTS animated shapes the report warns that native players slow down (ThorVG may not load the
+    file) and names the mobile preset; the CLI prints the report's warnings, which only the web page showed."""
+    from converter.cli import main
+
+    out = tmp_path / "face.json"
+    args = ["convert", str(sample_path), "--to", "lottie", "--size", "96", "--end", "4", "-q", "-o", str(out)]
+    assert main(args) == 0
+    assert "warning" not in capsys.readouterr().err  # a small face: no warning
+    monkeypatch.setattr(lottie, "HEAVY_ELEMENTS", 10)
+    assert main(args) == 0
+    err = capsys.readouterr().err
+    assert "facesvg: warning: this Lottie animates" in err and "--preset mobile" in err
