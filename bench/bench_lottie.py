@@ -73,6 +73,8 @@ def _sizes_and_fps() -> tuple[list[str], list[str], list[str]]:
             data = result.data
             raw, gz = len(data) / 1024, _gzip_kb(data)
             sizes.append(f"| {face} | {variant} | {to} | {raw:,.0f} | {gz:,.0f} | {gz / svg_gz:.2f} | {cpu:.2f} |")
+        errors = lottie.schema_errors(lottie.animation_of(made["lottie"][0].data)[0])
+        notes.append(f"{face} ({variant}): {len(errors)} schema errors{': ' + errors[0] if errors else ''}.")
         dot_kb = len(made["dotlottie"][0].data) / 1024
         verdict = "met" if dot_kb <= TARGET_DOTLOTTIE * svg_gz else "missed"
         notes.append(f"{face} ({variant}): dotLottie {dot_kb:,.0f} KB against {TARGET_DOTLOTTIE:g} x the SVG's {svg_gz:,.0f} KB "

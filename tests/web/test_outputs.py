@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import json
 import os
 import re
 import subprocess
@@ -126,3 +127,28 @@ def test_puppet_job_with_a_take_is_served_with_its_own_player(client):
     assert html.mimetype == "text/html" and b"window.puppet" in html.data
     page = client.get(job["links"]["page"]).get_data(as_text=True)
     assert 'data-viewer="frame"' in page and "MySlate_3.csv" in page
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("app", ["embedded"], indirect=True)
+@pytest.mark.parametrize("to, media", [("lottie", "application/json"), ("dotlottie", "application/zip")])
+def test_lottie_jobs_download_what_the_players_read(client, to, media):
+    """A web job to Lottie or dotLottie finishes, is verified like an SVG, downloads as an attachment of its
+    media type, and its page shows the result (a Lottie's own metadata names the frames it holds)."""
+    r = client.post("/api/v1/jobs", data={"file": (io.BytesIO(SAMPLE.read_bytes()), "face.glb"), "to": to,
+                                          "size": "128", "end": "10"}, content_type="multipart/form-data")
+    assert r.status_code == 202, r.get_json()
+    job = wait_job(client, r.get_json()["id"], timeout=240)
+    assert job["state"] == "done", job["error"]
+    got = client.get(job["links"]["result"])
+    assert got.mimetype == media and "attachment" in got.headers["Content-Disposition"]
+    data = got.data
+    if to == "dotlottie":
+        with zipfile.ZipFile(io.BytesIO(data)) as z:
+            assert "manifest.json" in z.namelist()
+            data = z.read("animations/face.json")
+    doc = json.loads(data)
+    assert doc["op"] == job["result"]["report"]["counts"]["frames"] == 10 and doc["layers"]
+    assert job["result"]["report"]["figures"]["max_deviation_px"] <= 0.25 + 1e-9
+    page = client.get(job["links"]["page"])
+    assert page.status_code == 200 and to in page.get_data(as_text=True)
