@@ -35,6 +35,7 @@ from bench.capture_like import capture_like
 from bench.playback import (
     ENGINE_PLAY_S,
     ENGINE_WARM_S,
+    WEBKIT_CPU,
     chromium,
     host_page,
     installed_engines,
@@ -69,7 +70,7 @@ LIMIT_S = 60.0  # per cell: a page that does not load and play by then is cut of
 HEAVY_LIMIT_S = 90.0
 # (column, cell, fps at least): issue 49's targets; "met" allows the half frame a 60 Hz rAF clock reads below 60.
 TARGETS = (("Chromium 1x", "cr1", 60.0), ("Chromium 4x", "cr4", 30.0), ("Chromium 4x <img>", "img4", 30.0),
-           ("Firefox", "ff", 50.0), ("WebKit", "wk", 50.0))
+           ("Firefox", "ff", 50.0), ("WebKit", "wk", 50.0), ("WebKit CPU raster", "wkc", 50.0))
 SLACK = 0.5
 SVG = "{http://www.w3.org/2000/svg}"
 ANIMATIONS = {f"{SVG}{t}" for t in ("animate", "animateTransform", "animateMotion", "set")}
@@ -225,8 +226,8 @@ def engine(launch: Callable[[], contextlib.AbstractContextManager[Session]]) -> 
 
 def play_engines(outputs: list[Output], loads: list[float]) -> list[str]:
     """Firefox ESR's and WebKitGTK's cells (unthrottled, as a document); notes on engines not installed."""
-    found, notes = installed_engines("cells")
-    engines = [({"Firefox ESR": "ff", "WebKitGTK": "wk"}[name], launch) for name, launch in found]
+    found, notes = installed_engines("cells", cpu_raster=True)
+    engines = [({"Firefox ESR": "ff", "WebKitGTK": "wk", WEBKIT_CPU: "wkc"}[name], launch) for name, launch in found]
     for cell, launch in engines:
         with engine(launch) as e:
             for o in outputs:
@@ -279,6 +280,7 @@ def row(o: Output, outputs: list[Output]) -> str:
     return (f"| {o.face} | {name} | {shape} | {o.kb:,.0f} / {o.gzip_kb:,.0f} | {colour} | {o.cpu_s:.2f} | "
             f"{predicted} | {runs} | " + " / ".join(_cell(cells.get(c)) for c in ("cr1", "cr4", "cr6"))
             + f" | {_cell(cells.get('img4'))} | {_cell(cells.get('ff'))} | {_cell(cells.get('wk'))} | "
+            f"{_cell(cells.get('wkc'))} | "
             f"{targets(o, cells)} |")
 
 
@@ -302,7 +304,10 @@ def run() -> str:
         "heavy. runs = runs per cell (the median).\n\n"
         f"fps = requestAnimationFrame callbacks a second. Chromium (headless, Playwright): {CHROMIUM_SECONDS:g} s "
         f"after {WARM_S:g} s of play, as a document at 1x / 4x / 6x CPU throttling (DevTools), and inside `<img>` "
-        f"at 4x. Firefox ESR (headless, Marionette) and WebKitGTK (MiniBrowser on Xvfb, WebKitWebDriver): "
+        f"at 4x. Firefox ESR (headless, Marionette) and WebKitGTK (MiniBrowser on Xvfb, WebKitWebDriver; twice: as "
+        "installed, which rasterises with Skia on OpenGL, here Mesa's software llvmpipe, and with "
+        "WEBKIT_SKIA_ENABLE_CPU_RENDERING=1, Skia on the CPU as headless Chromium rasterises here; a phone's WebKit "
+        "draws on real graphics hardware, which neither is): "
         f"unthrottled, as a document, {ENGINE_PLAY_S:g} s after {ENGINE_WARM_S:g} s of play; the player has no "
         "WebGL in headless Firefox and draws with its canvas 2D fallback there. A file predicted heavy plays at 1x "
         "and 4x only in Chromium (its 4x cell checks the prediction: 1000 / fps against predicted ms); a cell is "
@@ -316,8 +321,9 @@ def run() -> str:
         f"{min(loads):.1f}-{max(loads):.1f} (median {statistics.median(loads):.1f}); figures from a loaded "
         "machine are lower than a quiet one's.\n\n"
         "| face | output | paths / animated / colour | KB / gzip KB | colour error p99 / max | CPU s | predicted ms "
-        "at 4x | runs | Chromium 1x / 4x / 6x | Chromium 4x `<img>` | Firefox ESR | WebKitGTK | targets |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+        "at 4x | runs | Chromium 1x / 4x / 6x | Chromium 4x `<img>` | Firefox ESR | WebKitGTK | WebKitGTK CPU raster "
+        "| targets |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
     return head + "\n".join(row(o, outputs) for o in outputs) + "".join(f"\n\n{n}" for n in notes) + "\n"
 

@@ -31,10 +31,18 @@ from tests.engines import PAGE, Firefox, Session, WebKit, firefox_path, launched
 THROTTLES = (1, 4, 6)  # CDP CPU throttling rates: a desktop, a mid-range phone, a low-end phone
 
 
-def installed_engines(unit: str = "column") -> tuple[list[tuple[str, Callable[[], AbstractContextManager[Session]]]],
-                                                       list[str]]:
-    """Firefox ESR and WebKitGTK, each (name, a launcher of its tests/engines.py session) where installed, and a
-    note for each one missing (its table loses that unit: "column", "rows", ...)."""
+# WebKitGTK 2.50 rasterises with Skia on OpenGL; on a machine without a GPU that is Mesa's llvmpipe, which made the
+# default SVG several times slower than Skia on the CPU (an iPhone's WebKit draws on real hardware). This variable
+# has it rasterise on the CPU, as headless Chromium does here.
+WEBKIT_CPU_RASTER = {"WEBKIT_SKIA_ENABLE_CPU_RENDERING": "1"}
+WEBKIT_CPU = "WebKitGTK (CPU raster)"
+
+
+def installed_engines(unit: str = "column", cpu_raster: bool = False
+                      ) -> tuple[list[tuple[str, Callable[[], AbstractContextManager[Session]]]], list[str]]:
+    """Firefox ESR and WebKitGTK (and with cpu_raster WebKitGTK rasterising on the CPU, WEBKIT_CPU), each (name, a
+    launcher of its tests/engines.py session) where installed, and a note for each one missing (its table loses
+    that unit: "column", "rows", ...)."""
     engines, notes = [], []
     if firefox_path():
         engines.append(("Firefox ESR", lambda: launched_firefox(firefox_path())))
@@ -42,6 +50,8 @@ def installed_engines(unit: str = "column") -> tuple[list[tuple[str, Callable[[]
         notes.append(f"Firefox ESR is not installed: no Firefox {unit}.")
     if webkit_paths():
         engines.append(("WebKitGTK", lambda: launched_webkit(*webkit_paths())))
+        if cpu_raster:
+            engines.append((WEBKIT_CPU, lambda: launched_webkit(*webkit_paths(), env=WEBKIT_CPU_RASTER)))
     else:
         notes.append(f"WebKitGTK's WebKitWebDriver, MiniBrowser or Xvfb is missing: no WebKit {unit}.")
     return engines, notes

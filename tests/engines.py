@@ -141,7 +141,7 @@ class WebKit(Session):
 
     name = "webkit"
 
-    def __init__(self, driver: str, minibrowser: str, display: str) -> None:
+    def __init__(self, driver: str, minibrowser: str, display: str, env: dict[str, str] | None = None) -> None:
         from selenium import webdriver
         from selenium.webdriver.webkitgtk.service import Service
 
@@ -150,7 +150,7 @@ class WebKit(Session):
         options.binary_location = minibrowser
         options.add_argument("--automation")
         service = Service(executable_path=driver, service_args=["--host=127.0.0.1"],
-                          env={**os.environ, "DISPLAY": display},
+                          env={**os.environ, **(env or {}), "DISPLAY": display},
                           log_output=str(Path(self._dir.name) / "webdriver.log"))
         self.driver = webdriver.WebKitGTK(options=options, service=service)
         try:
@@ -231,10 +231,11 @@ def launched_firefox(exe: str) -> Iterator[Firefox]:
 
 
 @contextlib.contextmanager
-def launched_webkit(driver: str, minibrowser: str) -> Iterator[WebKit]:
-    """A WebKitGTK session on its own Xvfb display for the length of the block (tests and bench)."""
+def launched_webkit(driver: str, minibrowser: str, env: dict[str, str] | None = None) -> Iterator[WebKit]:
+    """A WebKitGTK session on its own Xvfb display for the length of the block (tests and bench); env: variables
+    its MiniBrowser gets besides ours (e.g. playback.WEBKIT_CPU_RASTER)."""
     with xvfb() as display:
-        session = WebKit(driver, minibrowser, display)
+        session = WebKit(driver, minibrowser, display, env)
         try:
             yield session
         finally:
