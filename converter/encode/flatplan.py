@@ -20,10 +20,11 @@ from converter import heap
 from converter.encode import collapse, freeknots, groups, merge, seams
 from converter.encode import keys as keyframes
 from converter.encode import palette as shared_colours
-from converter.encode.budget import ErrorBudget
+from converter.encode.budget import ErrorBudget, viewbox_scale
 from converter.encode.colours import color_steps
 from converter.encode.order import draw_list
 from converter.encode.tracks import Tracks
+from converter.errors import InputError
 from converter.options import ConversionOptions, Progress, no_progress, span
 from converter.sheet import Sheet
 
@@ -135,6 +136,31 @@ class FlatPlan:
     def gain(self) -> np.ndarray:
         """float64 (P,) local -> screen error gain of each path's group (1 without groups)."""
         return self.rigid.gain if self.rigid is not None else np.ones(self.n_paths)
+
+
+class Still(NamedTuple):
+    """One frame as static paths: what a flat writer spells for --frame (``still``)."""
+
+    frame: int
+    scale: int  # integer units per px (ErrorBudget's viewbox scale)
+    tris: np.ndarray  # int (P,) triangles shown at the frame, back to front
+    levels: np.ndarray  # int64 (P, 3) each one's exact colour at the frame, 8-bit levels
+    corners: np.ndarray  # int64 (P, 6) its corners on the scale's grid, from the one its path starts at
+    closed: np.ndarray  # bool (P,) the path is closed (else its one outline edge is left open)
+    bare: np.ndarray  # bool (P,) the path has no seam stroke
+
+
+def still(sheet: Sheet, options: ConversionOptions, frame: int) -> Still:
+    """One frame of the sheet as static paths (exact colours, coordinates rounded to the tolerance's grid, this
+    frame's own seam strokes); InputError for a frame outside the animation."""
+    if not 0 <= frame < sheet.n_frames:
+        raise InputError(f"frame {frame} is outside 0..{sheet.n_frames - 1}; choose one inside.")
+    scale = viewbox_scale(options.tolerance)
+    tris = sheet.order[sheet.visible[frame, sheet.order]]
+    levels = np.clip(np.rint(sheet.face_rgb[frame, sheet.color_columns(tris)] * 255), 0, 255).astype(np.int64)
+    st = strokes(sheet, tris, np.ones((1, len(tris)), bool), slice(frame, frame + 1))  # this frame's outline
+    q = np.rint(sheet.xy[frame][st.faces[tris]].reshape(-1, 6).astype(np.float64) * scale).astype(np.int64)
+    return Still(frame, scale, tris, levels, q, st.closed(tris), st.bare(tris))
 
 
 def radius(budget: ErrorBudget, rigid: groups.Plan | None) -> tuple[float | np.ndarray, float | np.ndarray]:

@@ -40,9 +40,8 @@ import numpy as np
 
 from converter.encode import flatplan, groups
 from converter.encode import palette as shared_colours
-from converter.encode.budget import viewbox_scale
 from converter.encode.colours import color_error
-from converter.encode.flatplan import STROKE_PX, strokes
+from converter.encode.flatplan import STROKE_PX
 from converter.encode.groups import BandMotion
 from converter.errors import InputError
 from converter.options import ConversionOptions, Progress, Report, no_progress, span
@@ -282,15 +281,10 @@ def package(anim: bytes) -> bytes:
 
 
 def write_still(sheet: Sheet, options: ConversionOptions, report: Report, frame: int) -> bytes:
-    """One frame as static paths (exact colours, coordinates rounded to the tolerance's grid), one frame long."""
-    if not 0 <= frame < sheet.n_frames:
-        raise InputError(f"frame {frame} is outside 0..{sheet.n_frames - 1}; choose one inside.")
-    scale = viewbox_scale(options.tolerance)
-    tris = sheet.order[sheet.visible[frame, sheet.order]]
-    levels = np.clip(np.rint(sheet.face_rgb[frame, sheet.color_columns(tris)] * 255), 0, 255).astype(np.int64)
-    st = strokes(sheet, tris, np.ones((1, len(tris)), bool), slice(frame, frame + 1))  # this frame's outline
-    q = np.rint(sheet.xy[frame][st.faces[tris]].reshape(-1, 6).astype(np.float64) * scale).astype(np.int64)
-    closed, bare = st.closed(tris), st.bare(tris)
+    """One frame as static paths (flatplan.still: exact colours, coordinates on the tolerance's grid), one frame
+    long."""
+    fs = flatplan.still(sheet, options, frame)
+    scale, tris, levels, q, closed, bare = fs.scale, fs.tris, fs.levels, fs.corners, fs.closed, fs.bare
     width = fixed(np.array([round(STROKE_PX * scale * 1000)]), 3)[0]
     items = [element_text([shape_text(q[j:j + 1], np.zeros(1, np.int64), bool(closed[j]))],
                           _colour_property(np.zeros(1, np.int64), levels[j:j + 1]), width, bool(bare[j]))

@@ -38,11 +38,10 @@ from converter.arrays import lengths, lexsort_ints
 from converter.encode import collapse, flatplan, groups
 from converter.encode import keys as keyframes
 from converter.encode import palette as shared_colours
-from converter.encode.budget import ErrorBudget, viewbox_scale
+from converter.encode.budget import ErrorBudget
 from converter.encode.colours import color_error
-from converter.encode.flatplan import SHARED_SET_SIZE, STATIC_LEVELS, STROKE_PX, Strokes, strokes  # noqa: F401
+from converter.encode.flatplan import STROKE_PX, Strokes
 from converter.encode.tracks import Tracks, blocks
-from converter.errors import InputError
 from converter.options import ConversionOptions, Progress, Report, no_progress, span
 from converter.sheet import Sheet
 from converter.writers import svgtext
@@ -135,17 +134,11 @@ def _style(palette: np.ndarray, scale: int, bare: bool = False) -> str:
 
 
 def write_still(sheet: Sheet, options: ConversionOptions, report: Report, frame: int) -> bytes:
-    """One frame as static paths (exact colours, coordinates rounded to the tolerance's grid)."""
-    if not 0 <= frame < sheet.n_frames:
-        raise InputError(f"frame {frame} is outside 0..{sheet.n_frames - 1}; choose one inside.")
-    scale = viewbox_scale(options.tolerance)
-    tris = sheet.order[sheet.visible[frame, sheet.order]]
-    levels = np.clip(np.rint(sheet.face_rgb[frame, sheet.color_columns(tris)] * 255), 0, 255).astype(np.int64)
-    palette, cls = np.unique(levels, axis=0, return_inverse=True)
-    st = strokes(sheet, tris, np.ones((1, len(tris)), bool), slice(frame, frame + 1))  # this frame's outline
-    q = np.rint(sheet.xy[frame][st.faces[tris]].reshape(-1, 6).astype(np.float64) * scale).astype(np.int64)
-    d = _path_strings(q, closed=st.closed(tris))
-    bare = st.bare(tris)
+    """One frame as static paths (flatplan.still: exact colours, coordinates rounded to the tolerance's grid)."""
+    fs = flatplan.still(sheet, options, frame)
+    scale, tris, bare = fs.scale, fs.tris, fs.bare
+    palette, cls = np.unique(fs.levels, axis=0, return_inverse=True)
+    d = _path_strings(fs.corners, closed=fs.closed)
     out = [_header(sheet, scale), metadata(sheet, options, report, {"encoding": {"mode": "still", "scale": scale,
                                                                            "frame": frame}}, order=tris),
            f"<title>{escape(sheet.name)}</title>", _style(palette, scale, bool(bare.any())), "<g>"]
