@@ -21,7 +21,7 @@ from converter.encode import collapse, freeknots, groups, merge, seams
 from converter.encode import keys as keyframes
 from converter.encode import palette as shared_colours
 from converter.encode.budget import ErrorBudget, viewbox_scale
-from converter.encode.colours import color_steps
+from converter.encode.colours import color_error, color_steps
 from converter.encode.order import draw_list
 from converter.encode.tracks import Tracks
 from converter.errors import InputError
@@ -132,6 +132,14 @@ class FlatPlan:
     def radius(self) -> tuple[float | np.ndarray, float | np.ndarray]:
         """Euclidean px left for keyframing and the bound an exactly checked fit may use (``radius``)."""
         return radius(self.budget, self.rigid)
+
+    def colour_error(self, sheet: Sheet) -> np.ndarray:
+        """8-bit levels between each shown frame's exact colour and what the plan plays there (its palette entry's
+        held steps, or the path's own steps)."""
+        columns = sheet.color_columns(self.tris)
+        if self.shared is None:
+            return color_error(sheet.face_rgb, self.active, self.steps, columns)
+        return shared_colours.played_error(sheet.face_rgb, columns, self.active, self.shared)
 
     def gain(self) -> np.ndarray:
         """float64 (P,) local -> screen error gain of each path's group (1 without groups)."""

@@ -39,14 +39,13 @@ from typing import NamedTuple
 import numpy as np
 
 from converter.encode import flatplan, groups
-from converter.encode import palette as shared_colours
-from converter.encode.colours import color_error
 from converter.encode.flatplan import STROKE_PX
 from converter.encode.groups import BandMotion
 from converter.errors import InputError
 from converter.options import ConversionOptions, Progress, Report, no_progress, span
 from converter.sheet import Sheet
 from converter.writers.metadata import source_fields
+from converter.writers.svgtext import digits
 
 LOTTIE_VERSION = "5.12.0"  # the bodymovin format version lottie-web 5.x reads without its legacy conversions
 FORMAT_VERSION = 1  # of meta.facesvg
@@ -64,7 +63,6 @@ ORDER_DONE = 0.02  # progress of the writing when the drawing order is known and
 KEYS_DONE = 0.8  # progress of the writing when the plan is done and the text starts
 HEAVY_ELEMENTS = 2000  # animated shapes past which the report warns (bench_lottie: ThorVG may not load such a file)
 TEXT_BLOCK = 512  # elements whose texts are written between two progress calls
-IDENTITY = {"translate": [0.0, 0.0], "rotate": [0.0], "skewX": [0.0], "scale": [1.0, 1.0]}
 
 
 # --- numbers ---------------------------------------------------------------------------------------------------
@@ -176,18 +174,13 @@ def shape_text(rows: np.ndarray, half: np.ndarray, closed: bool) -> str:
     return '{"ty":"sh","ks":{"a":1,"k":[' + ",".join(keys) + "]}}"
 
 
-def _digits(v: np.ndarray) -> np.ndarray:
-    """Characters of each integer written in decimal (sign included)."""
-    return 1 + (v < 0) + np.searchsorted(10 ** np.arange(1, 19, dtype=np.int64), np.abs(v), side="right")
-
-
 def offset(rows: np.ndarray) -> np.ndarray | None:
     """A static integer position (2,) for an element's key rows (K, n * 6), the median of its first points, where
     the digits it saves its coordinates outweigh its transform's text; else None. Gzip keeps about a twentieth
     of the text Lottie repeats per key but most of the digits: this took 5 % off the sample's deflated size."""
     at = np.median(rows[:, 0:2], axis=0).astype(np.int64)
     moved = rows - np.tile(at, rows.shape[1] // 2)
-    saved = int(_digits(rows).sum() - _digits(moved).sum())
+    saved = int(digits(rows).sum() - digits(moved).sum())
     return at if saved > len(_position(at)) - len(_position(None)) else None
 
 
@@ -438,9 +431,7 @@ def _report(report: Report, sheet: Sheet, fp: flatplan.FlatPlan, n_elements: int
         report.counts["merged_triangles"] = int(len(flatplan.merged_paths(fp.sets)))
     if fp.shared is not None:
         report.counts["palette_entries"] = entries
-    columns = sheet.color_columns(tris)
-    err = (color_error(sheet.face_rgb, fp.active, fp.steps, columns) if fp.shared is None
-           else shared_colours.played_error(sheet.face_rgb, columns, fp.active, fp.shared))
+    err = fp.colour_error(sheet)
     report.figures["color_error_max_levels"] = float(err.max(initial=0.0))
     if fp.rigid is not None:
         report.counts.update({f"rigid_{k}": int(v) for k, v in fp.rigid.stats.items() if k != "max_gain"})

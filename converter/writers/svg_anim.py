@@ -39,7 +39,6 @@ from converter.encode import collapse, flatplan, groups
 from converter.encode import keys as keyframes
 from converter.encode import palette as shared_colours
 from converter.encode.budget import ErrorBudget
-from converter.encode.colours import color_error
 from converter.encode.flatplan import STROKE_PX, Strokes
 from converter.encode.tracks import Tracks, blocks
 from converter.options import ConversionOptions, Progress, Report, no_progress, span
@@ -47,7 +46,7 @@ from converter.sheet import Sheet
 from converter.writers import svgtext
 from converter.writers.metadata import source_fields
 from converter.writers.svg_transforms import CLOSE, group_open
-from converter.writers.svgtext import key_times
+from converter.writers.svgtext import digits, key_times
 from converter.writers.svgtext import number as svg_number
 
 FORMAT_VERSION = 2
@@ -161,12 +160,6 @@ def _path_strings(q: np.ndarray, offset: np.ndarray | None = None, closed: np.nd
     return svgtext.subpaths(r, closed)
 
 
-def _digits(v: np.ndarray) -> np.ndarray:
-    """Characters of each integer written in decimal (sign included)."""
-    a = np.abs(v)
-    return 1 + (v < 0) + np.searchsorted(10 ** np.arange(1, 19, dtype=np.int64), a, side="right")
-
-
 def offsets(rows: np.ndarray, pk: np.ndarray, p: int) -> np.ndarray:
     """Per path (P, 2) a static integer translate for its keys' moveto (rows (K, 6), path of each pk), where the
     digits it saves outweigh its transform attribute; zero elsewhere."""
@@ -180,8 +173,8 @@ def offsets(rows: np.ndarray, pk: np.ndarray, p: int) -> np.ndarray:
     for c in (0, 1):  # the median moveto of each path's keys
         out[has, c] = rows[lexsort_ints((rows[:, c], pk)), c][mid]
     m = rows[:, :2]
-    saved = np.bincount(pk, (_digits(m) - _digits(m - out[pk])).sum(axis=1), minlength=p)
-    cost = len(' transform="translate( )"') + _digits(out).sum(axis=1)
+    saved = np.bincount(pk, (digits(m) - digits(m - out[pk])).sum(axis=1), minlength=p)
+    cost = len(' transform="translate( )"') + digits(out).sum(axis=1)
     out[saved <= cost] = 0
     return out
 
@@ -346,7 +339,7 @@ def raw_values_bytes(xy: np.ndarray, corners: np.ndarray) -> int:
     for a in range(0, len(verts), block):
         v = verts[a:a + block]
         c = np.rint(np.asarray(np.take(xy, v, axis=1), np.float64) * 100).astype(np.int64)
-        per = (_digits(np.abs(c) // 100) + 3 + (c < 0)).sum(axis=2)  # (T, n): "x.xx" "y.yy" of each vertex
+        per = (digits(np.abs(c) // 100) + 3 + (c < 0)).sum(axis=2)  # (T, n): "x.xx" "y.yy" of each vertex
         total += int(((per.sum(axis=0) + per[-1]) * uses[v]).sum())
     return total + (t + 1) * p * (7 + 1) - p  # M L L Z and two commas per value, ';' between values
 
@@ -612,7 +605,6 @@ def _encode_keyed(sheet: Sheet, fp: flatplan.FlatPlan, dur: str, report: Report,
         m_anims, m_first, m_keys = _merged_geometry(fp.merged, sets, fp.gain(), budget, t, dur, closed)
     del track
     # Colour: held steps within the colour tolerance (color_steps); the first step's colour is the path's class.
-    columns = sheet.color_columns(tris)
     # A step shows from frame k: placed half a frame early, rounded by at most a quarter frame.
     c_dec = math.ceil(math.log10(2 * max(t, 1)))
     if shared is not None:  # every path refers to its palette entry: per path only its frame-0 colour and class
@@ -702,8 +694,7 @@ def _encode_keyed(sheet: Sheet, fp: flatplan.FlatPlan, dur: str, report: Report,
     report.counts["static_paths"] = int((~moving).sum())
     report.counts["palette"] = len(palette)
     report.counts["animated_paths"] = animated
-    err = (color_error(sheet.face_rgb, active, ckeys, columns) if shared is None
-           else shared_colours.played_error(sheet.face_rgb, columns, active, shared))
+    err = fp.colour_error(sheet)
     report.figures["color_error_max_levels"] = float(err.max(initial=0.0))
     report.figures["color_error_p99_levels"] = float(np.percentile(err, 99, overwrite_input=True)) if err.size else 0.0
     report.figures["keys_per_path"] = n_keys / max(p, 1)

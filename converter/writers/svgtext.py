@@ -103,3 +103,8 @@ def key_times(frames: np.ndarray, n_frames: int, decimals: int | np.ndarray, sna
             raise ValueError(f"unknown snap {snap!r}")
         out[sel] = np.asarray(numbers(units / q, d), object)[inv]
     return out.tolist()
+
+
+def digits(v: np.ndarray) -> np.ndarray:
+    """Characters of each integer written in decimal (sign included)."""
+    return 1 + (v < 0) + np.searchsorted(10 ** np.arange(1, 19, dtype=np.int64), np.abs(v), side="right")
