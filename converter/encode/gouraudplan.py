@@ -139,12 +139,6 @@ def hold_colours_in_range(mask: np.ndarray, values: np.ndarray, active: np.ndarr
     return mask, values
 
 
-def welded_ids(xy: np.ndarray, depth: np.ndarray) -> np.ndarray:
-    """(V,) one id per group of vertices that coincide in every frame given (xy (T, V, 2), depth (T, V)):
-    seams.welded_ids."""
-    return seams.welded_ids(xy, depth)
-
-
 def outline_edges(tris: np.ndarray, ids: np.ndarray | None = None) -> np.ndarray:
     """Bool (K, 3): edge i (vertex i to i+1) belongs to no other of the triangles (vertices compared by ids)."""
     tris = np.asarray(tris, np.int64)
@@ -245,7 +239,7 @@ def plan(sheet: Sheet, options: ConversionOptions, progress: Progress = no_progr
     if method == "exact":
         tris = sheet.faces[order]
         drawn = np.take(sheet.visible[frames], order, axis=1)
-        corners = welded_ids(sheet.xy[frames], sheet.depth[frames])[tris]
+        corners = seams.welded_ids(sheet.xy[frames], sheet.depth[frames])[tris]
         skip, _ = seams.skips(corners, drawn, sheet.xy[frames], tris, SEAM_STROKE / 2)
         if not still:  # the layout is one for all frames: a stroke that would spill at a frame is off there
             stroke_off = seams.stroke_off(corners, drawn, skip, sheet.xy[frames], tris, SEAM_STROKE / 2)

@@ -16,14 +16,7 @@ from xml.sax.saxutils import escape
 import numpy as np
 
 from converter.encode import gouraudplan
-from converter.encode.gouraudplan import (  # noqa: F401 (re-exported: tests and readers use them here)
-    SEAM_STROKE,
-    UNDERLAY_INSET,
-    outline_edges,
-    seam_layout,
-    silhouette_edges,
-    welded_ids,
-)
+from converter.encode.gouraudplan import SEAM_STROKE
 from converter.errors import InputError
 from converter.options import ConversionOptions, Progress, Report, no_progress
 from converter.sheet import Sheet

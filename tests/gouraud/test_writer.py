@@ -175,7 +175,7 @@ def test_seam_stroke_is_off_exactly_where_it_would_reach_past_the_outline(sheet)
     """One seam layout for all frames; a stroke is off (stroke-width 0) at the frames seams.stroke_off names."""
     root, _, _ = write(sheet, shading="gouraud", raw=True)
     tris, drawn = sheet.faces[sheet.order], sheet.visible[:, sheet.order]
-    corners = svg_gouraud.welded_ids(sheet.xy, sheet.depth)[tris]
+    corners = seams.welded_ids(sheet.xy, sheet.depth)[tris]
     reach = svg_gouraud.SEAM_STROKE / 2
     skip, _ = seams.skips(corners, drawn, sheet.xy, tris, reach)
     off = seams.stroke_off(corners, drawn, skip, sheet.xy, tris, reach)
@@ -226,9 +226,9 @@ def test_seam_layout_strokes_interior_edges_only():
     # A hexagon fan around vertex 0: each triangle has two spokes (interior) and one rim edge (outline).
     fan = np.array([[0, 1 + i, 1 + (i + 1) % 6] for i in range(6)])
     tris = np.concatenate([fan, [[7, 8, 9]]])  # plus a lone triangle: all outline
-    outline = svg_gouraud.outline_edges(tris)
+    outline = gouraudplan.outline_edges(tris)
     assert outline.sum() == 6 + 3
-    rotated, closed, stroked = svg_gouraud.seam_layout(tris, outline)
+    rotated, closed, stroked = gouraudplan.seam_layout(tris, outline)
     for r, orig in zip(rotated[:6], fan):
         assert sorted(r) == sorted(orig) and list(np.roll(r, -list(r).index(orig[0]))) == list(orig)  # same winding
         assert 0 not in (r[0], r[-1])  # the implicit closing edge (last -> first) is the rim, which is not stroked
@@ -241,18 +241,18 @@ def test_welded_duplicates_share_edges():
     xy = np.array([[[0, 0], [10, 0], [0, 10], [10, 10], [0, 10], [10, 0]]], float)
     depth = np.zeros((1, 6))
     tris = np.array([[0, 1, 2], [3, 4, 5]])
-    assert svg_gouraud.outline_edges(tris).sum() == 6
-    ids = svg_gouraud.welded_ids(xy, depth)
+    assert gouraudplan.outline_edges(tris).sum() == 6
+    ids = seams.welded_ids(xy, depth)
     assert ids[2] == ids[4] and ids[1] == ids[5] and len(set(ids.tolist())) == 4
-    assert svg_gouraud.outline_edges(tris, ids).sum() == 4
+    assert gouraudplan.outline_edges(tris, ids).sum() == 4
 
 
 def test_silhouette_edges_tell_folds_from_the_outline():
     # A fold: B begins 0.3 px right of A's right edge without sharing it; all other edges face empty space.
     tri_xy = np.array([[[10, 10], [30, 10], [30, 30]], [[30.3, 10], [50, 10], [30.3, 30]]], float)
-    sil = svg_gouraud.silhouette_edges(tri_xy, np.ones((2, 3), bool), 64, 64)
+    sil = gouraudplan.silhouette_edges(tri_xy, np.ones((2, 3), bool), 64, 64)
     assert sil.tolist() == [[True, False, True], [True, True, False]]
-    assert not svg_gouraud.silhouette_edges(tri_xy, np.zeros((2, 3), bool), 64, 64).any()  # only outline edges
+    assert not gouraudplan.silhouette_edges(tri_xy, np.zeros((2, 3), bool), 64, 64).any()  # only outline edges
 
 
 def test_underlay_stays_inside_the_silhouette_but_covers_folds():
@@ -260,7 +260,7 @@ def test_underlay_stays_inside_the_silhouette_but_covers_folds():
     sil = np.array([[True, False, False]])  # only the top edge (y = 10) is silhouette
     (path,) = svg_gouraud.underlay(gouraudplan.underlay(tri_xy, np.full((1, 3, 3), 0.5), np.zeros(1, int), sil))
     pts = np.array(NUM.findall(path.split('"')[1]), float).reshape(3, 2)
-    assert np.allclose(pts[:, 1].min(), 10 + svg_gouraud.UNDERLAY_INSET, atol=0.06)  # top edge pulled in
+    assert np.allclose(pts[:, 1].min(), 10 + gouraudplan.UNDERLAY_INSET, atol=0.06)  # top edge pulled in
     assert np.allclose(pts[:, 0].min(), 10, atol=0.06)  # left edge (not silhouette) kept
     assert 'fill="#80' in path
 
